@@ -1,0 +1,4 @@
+//! # ground-sim — Umbra's ground segment
+//!
+//! Terrain in and out, SAR/InSAR simulation, the reference tile builder and closed-loop
+//! evaluation of nav-core. Everything runs on the host with `std`.

@@ -1,0 +1,2 @@
+//! `ground-sim` command-line interface.
+fn main() {}

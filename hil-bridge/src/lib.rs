@@ -1,0 +1,2 @@
+//! # hil-bridge
+#![no_std]

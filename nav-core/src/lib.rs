@@ -1,0 +1,49 @@
+//! # nav-core — Umbra's flight software
+//!
+//! Terrain-relative navigation for a lunar flyer inside permanently shadowed craters, where no
+//! camera sees anything: the flyer's own DEM patch (from its ranging sensor) is turned into a
+//! slope image and matched against a reference tile of SURF features precomputed on the ground
+//! from a simulated InSAR DEM (Liu & Jin, IEEE JSTARS 2023).
+//!
+//! ## Pipeline (per frame)
+//!
+//! 1. [`frame::DemPatch`] (heights, m) → [`slope::slope_into`] (Horn 3×3, fixed-point degrees).
+//! 2. [`integral::Integral`]: `u32` integral image with exact box sums.
+//! 3. [`detector`]: fast-Hessian keypoints, 3×3×3 non-maximum suppression, sub-pixel and
+//!    sub-scale Newton refinement.
+//! 4. [`describe`]: orientation (sliding 60° window) and 64-d descriptor.
+//! 5. [`surf::extract`] ties these together and keeps the `N` strongest keypoints.
+//!
+//! ## Rules this crate keeps
+//!
+//! * `#![no_std]`, no `alloc`: every buffer is caller-owned with a const-generic or caller-given
+//!   capacity ([`surf::SurfWorkspace`], [`frame::SlopeBuffer`], [`surf::Features`]).
+//! * No panic on any input: malformed frames and configurations give typed errors.
+//! * Deterministic and bit-identical across targets: integer box sums, `f32` in a fixed order,
+//!   `libm` for transcendental functions, bounded loops.
+//! * Conventions: `x` = column (right), `y` = row (down), pixel centres at integer coordinates;
+//!   slope in degrees, lengths in metres or pixels as named.
+//!
+//! ## Features
+//!
+//! * `defmt`: derive `defmt::Format` on public types.
+//!
+//! Memory bounds for each buffer are tabulated in `docs/bounds.md`.
+
+#![no_std]
+#![forbid(unsafe_code)]
+
+#[cfg(test)]
+extern crate std;
+
+pub mod describe;
+pub mod detector;
+pub mod frame;
+pub mod integral;
+pub mod slope;
+pub mod surf;
+
+pub use describe::{DESCRIPTOR_LEN, Descriptor};
+pub use detector::{DetectorConfig, Keypoint};
+pub use frame::{DemPatch, FrameError, SLOPE_NODATA, SlopeBuffer, SlopeImage, SlopePx};
+pub use surf::{Feature, Features, SurfConfig, SurfError, SurfWorkspace, extract};
