@@ -14,6 +14,12 @@ pub const DESCRIPTOR_LEN: usize = 64;
 /// A unit-length SURF descriptor (or all zeros where the window held no gradient at all).
 pub type Descriptor = [f32; DESCRIPTOR_LEN];
 
+/// Descriptor sample spacing in units of keypoint σ.
+pub const DESC_SPACING_PER_SIGMA: f32 = 0.85;
+
+/// Orientation Haar wavelet half-width in units of σ (full side ≈ 2× this).
+pub const ORIENT_HAAR_HALF_PER_SIGMA: f32 = 2.0;
+
 /// Orientation samples: offsets (i, j) in units of σ with i² + j² < 36 (radius 6σ).
 pub const ORIENT_SAMPLES: usize = 109;
 /// Step of the sliding orientation window's start angle, radians.
@@ -80,7 +86,7 @@ fn haar(ii: &Integral<'_>, x: isize, y: isize, k: isize) -> Option<(f32, f32)> {
 /// windowing and the result is `atan2(Σdy, Σdx)` of the best window.
 pub(crate) fn orientation(ii: &Integral<'_>, kp: &Keypoint, w: &Weights) -> f32 {
     let s = kp.scale_px;
-    let k = round_i(2.0 * s).max(1);
+    let k = round_i(ORIENT_HAAR_HALF_PER_SIGMA * s).max(1);
     let mut samples = [(0.0f32, 0.0f32, 0.0f32); ORIENT_SAMPLES];
     let mut n = 0usize;
     for &(i, j, g) in &w.orient {
@@ -132,9 +138,12 @@ pub(crate) fn orientation(ii: &Integral<'_>, kp: &Keypoint, w: &Weights) -> f32 
 /// 5 × 5 samples spaced σ apart, Haar half-width round(σ), responses rotated into the keypoint
 /// frame and Gaussian-weighted (σ_w = 3.3σ), normalised to unit length.
 pub(crate) fn descriptor(ii: &Integral<'_>, kp: &Keypoint, w: &Weights) -> Descriptor {
-    let s = kp.scale_px;
+    let s = kp.scale_px * DESC_SPACING_PER_SIGMA;
     let k = round_i(s).max(1);
-    let (si, co) = (libm::sinf(kp.orientation_rad), libm::cosf(kp.orientation_rad));
+    let (si, co) = (
+        libm::sinf(kp.orientation_rad),
+        libm::cosf(kp.orientation_rad),
+    );
     let mut d = [0.0f32; DESCRIPTOR_LEN];
     for j in 0..20usize {
         for i in 0..20usize {
@@ -149,10 +158,9 @@ pub(crate) fn descriptor(ii: &Integral<'_>, kp: &Keypoint, w: &Weights) -> Descr
             let ry = g * (co * gy - si * gx);
             let base = ((j / 5) * 4 + i / 5) * 4;
             if let Some(cell) = d.get_mut(base..base + 4) {
-                cell[0] += rx;
-                cell[1] += ry;
-                cell[2] += rx.abs();
-                cell[3] += ry.abs();
+                for (slot, v) in cell.iter_mut().zip([rx, ry, rx.abs(), ry.abs()]) {
+                    *slot += v;
+                }
             }
         }
     }

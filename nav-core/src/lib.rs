@@ -32,6 +32,16 @@
 
 #![no_std]
 #![forbid(unsafe_code)]
+// Flight code must not hide panics behind these.
+#![cfg_attr(
+    not(test),
+    deny(
+        clippy::unwrap_used,
+        clippy::expect_used,
+        clippy::panic,
+        clippy::indexing_slicing
+    )
+)]
 
 #[cfg(test)]
 extern crate std;

@@ -88,6 +88,7 @@ impl<const N: usize> Features<N> {
                 maxima: 0,
                 rejected_nodata: 0,
                 rejected_refine: 0,
+                rejected_scale: 0,
             },
         }
     }

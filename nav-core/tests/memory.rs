@@ -1,0 +1,29 @@
+//! Memory for one 256 × 256 frame: slope frame + integral image + response ring + keypoints.
+//! Sizes come from `size_of`, so they are exact and the same on every run.
+
+use nav_core::{Features, SlopeBuffer, SurfWorkspace};
+
+/// Largest frame side the flight configuration supports.
+const SIDE: usize = 256;
+/// Keypoint budget per frame in the flight configuration.
+const KEYPOINTS: usize = 256;
+
+#[test]
+fn memory_for_a_256_frame_fits_512_kib() {
+    let slope = size_of::<SlopeBuffer<{ SIDE * SIDE }>>();
+    let workspace = SurfWorkspace::<{ SIDE * SIDE }, SIDE>::footprint_bytes();
+    let features = Features::<KEYPOINTS>::footprint_bytes();
+    let total = slope + workspace + features;
+    println!("slope frame      {slope:>7} B");
+    println!(
+        "SURF workspace   {workspace:>7} B (integral {} B + response ring {} B)",
+        4 * SIDE * SIDE,
+        workspace - 4 * SIDE * SIDE
+    );
+    println!("features ({KEYPOINTS})   {features:>7} B");
+    println!(
+        "total            {total:>7} B = {:.1} KiB",
+        total as f64 / 1024.0
+    );
+    assert!(total <= 512 * 1024, "{total} B exceeds 512 KiB");
+}

@@ -1,0 +1,233 @@
+//! Bad input never panics, and the same input always gives the same bits.
+
+use nav_core::frame::{SlopePx, slope_from_deg};
+use nav_core::slope::slope_into;
+use nav_core::{
+    DemPatch, DetectorConfig, Features, FrameError, SLOPE_NODATA, SlopeImage, SurfConfig,
+    SurfError, SurfWorkspace, extract,
+};
+use proptest::prelude::*;
+
+const CAP_W: usize = 96;
+const CAP_PX: usize = CAP_W * CAP_W;
+
+/// Run the whole chain (DEM → slope → SURF) on arbitrary heights; returns the feature count.
+fn chain(
+    heights: &[f32],
+    w: usize,
+    h: usize,
+    pixel_m: f32,
+    cfg: &SurfConfig,
+) -> Result<usize, String> {
+    let dem = DemPatch::new_checked(heights, w, h, pixel_m).map_err(|e| e.to_string())?;
+    let mut slope = vec![SLOPE_NODATA; w * h];
+    let img = slope_into(&dem, &mut slope).map_err(|e| e.to_string())?;
+    let mut ws = Box::new(SurfWorkspace::<CAP_PX, CAP_W>::new());
+    let mut out = Features::<64>::new();
+    extract(&img, cfg, ws.scratch(), &mut out).map_err(|e| e.to_string())?;
+    for f in out.as_slice() {
+        let k = f.keypoint;
+        assert!(k.x_px.is_finite() && k.y_px.is_finite() && k.scale_px > 0.0);
+        assert!((0.0..std::f32::consts::TAU).contains(&k.orientation_rad));
+        assert!(f.descriptor.iter().all(|v| v.is_finite()));
+    }
+    Ok(out.len())
+}
+
+fn height_strategy() -> impl Strategy<Value = f32> {
+    prop_oneof![
+        8 => -5000.0f32..5000.0,
+        1 => Just(f32::NAN),
+        1 => Just(f32::INFINITY),
+        1 => Just(f32::NEG_INFINITY),
+        1 => Just(f32::MAX),
+        1 => Just(-9999.0),
+    ]
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 64, ..ProptestConfig::default() })]
+
+    #[test]
+    fn arbitrary_dems_never_panic(
+        (w, h, hs) in (1usize..120, 1usize..120).prop_flat_map(|(w, h)| {
+            (Just(w), Just(h), proptest::collection::vec(height_strategy(), w * h))
+        }),
+        pixel_m in prop_oneof![Just(0.0f32), Just(-1.0), Just(f32::NAN), 0.01f32..100.0],
+        threshold in prop_oneof![Just(0.0f32), 0.0f32..5.0, Just(f32::NAN), Just(-1.0)],
+        octaves in 0u8..6,
+        layers in 0u8..7,
+        upright in any::<bool>(),
+    ) {
+        let cfg = SurfConfig { detector: DetectorConfig { octaves, layers, threshold, min_scale_px: 0.0 }, upright };
+        // Any outcome is fine except a panic; errors must be the typed ones.
+        let _ = chain(&hs, w, h, pixel_m, &cfg);
+    }
+
+    #[test]
+    fn arbitrary_slope_pixels_never_panic(
+        w in 1usize..100,
+        h in 1usize..100,
+        raw in proptest::collection::vec(any::<u16>(), 1..10_000),
+    ) {
+        let n = w * h;
+        let px: Vec<SlopePx> = (0..n).map(|i| SlopePx::from_bits(raw[i % raw.len()])).collect();
+        let img = SlopeImage::new_checked(&px, w, h, 10.0).unwrap();
+        let mut ws = Box::new(SurfWorkspace::<CAP_PX, CAP_W>::new());
+        let mut out = Features::<32>::new();
+        let r = extract(&img, &SurfConfig::default(), ws.scratch(), &mut out);
+        prop_assert!(r.is_ok() || w > CAP_W);
+    }
+}
+
+#[test]
+fn degenerate_frames_give_empty_results_or_typed_errors() {
+    let cfg = SurfConfig::default();
+    // All NaN, all nodata, constant.
+    assert_eq!(chain(&vec![f32::NAN; 64 * 64], 64, 64, 10.0, &cfg), Ok(0));
+    let dem = vec![-9999.0f32; 64 * 64];
+    let patch = DemPatch::new_checked(&dem, 64, 64, 10.0)
+        .unwrap()
+        .with_nodata(-9999.0);
+    let mut slope = vec![SLOPE_NODATA; 64 * 64];
+    let img = slope_into(&patch, &mut slope).unwrap();
+    assert!(img.pixels().iter().all(|p| *p == SLOPE_NODATA));
+    assert_eq!(chain(&vec![1234.5f32; 64 * 64], 64, 64, 10.0, &cfg), Ok(0));
+    // Smaller than the smallest filter.
+    assert_eq!(chain(&vec![0.0f32; 8 * 8], 8, 8, 10.0, &cfg), Ok(0));
+    assert_eq!(chain(&[5.0], 1, 1, 10.0, &cfg), Ok(0));
+    // Zero or negative pixel size.
+    assert!(
+        chain(&[0.0f32; 16], 4, 4, 0.0, &cfg)
+            .unwrap_err()
+            .contains("pixel size")
+    );
+    assert!(chain(&[0.0f32; 16], 4, 4, -5.0, &cfg).is_err());
+    // Larger than the workspace.
+    let px = vec![slope_from_deg(3.0); (CAP_W + 1) * 10];
+    let img = SlopeImage::new_checked(&px, CAP_W + 1, 10, 10.0).unwrap();
+    let mut ws = Box::new(SurfWorkspace::<CAP_PX, CAP_W>::new());
+    let mut out = Features::<8>::new();
+    assert!(matches!(
+        extract(&img, &cfg, ws.scratch(), &mut out),
+        Err(SurfError::Frame(FrameError::TooLarge { .. }))
+    ));
+    // Bad configurations are typed errors.
+    let img = SlopeImage::new_checked(&px[..CAP_W * 10], CAP_W, 10, 10.0).unwrap();
+    for bad in [
+        DetectorConfig {
+            octaves: 0,
+            ..DetectorConfig::default()
+        },
+        DetectorConfig {
+            octaves: 9,
+            ..DetectorConfig::default()
+        },
+        DetectorConfig {
+            layers: 2,
+            ..DetectorConfig::default()
+        },
+        DetectorConfig {
+            threshold: f32::NAN,
+            ..DetectorConfig::default()
+        },
+        DetectorConfig {
+            min_scale_px: -1.0,
+            ..DetectorConfig::default()
+        },
+    ] {
+        let cfg = SurfConfig {
+            detector: bad,
+            upright: false,
+        };
+        assert!(matches!(
+            extract(&img, &cfg, ws.scratch(), &mut out),
+            Err(SurfError::Config(_))
+        ));
+    }
+}
+
+#[test]
+fn nodata_never_produces_features() {
+    // A smooth frame with a hole: keypoints must keep their filter footprints off the hole.
+    let (w, h) = (96usize, 96usize);
+    let mut z = vec![0.0f32; w * h];
+    for r in 0..h {
+        for c in 0..w {
+            let (x, y) = (c as f32, r as f32);
+            z[r * w + c] = 30.0 * ((x / 7.0).sin() * (y / 9.0).cos()) + 0.5 * x;
+        }
+    }
+    for r in 40..50 {
+        for c in 30..60 {
+            z[r * w + c] = f32::NAN;
+        }
+    }
+    let dem = DemPatch::new_checked(&z, w, h, 10.0).unwrap();
+    let mut slope = vec![SLOPE_NODATA; w * h];
+    let img = slope_into(&dem, &mut slope).unwrap();
+    let mut ws = Box::new(SurfWorkspace::<CAP_PX, CAP_W>::new());
+    let mut out = Features::<128>::new();
+    extract(&img, &SurfConfig::default(), ws.scratch(), &mut out).unwrap();
+    assert!(
+        out.stats.rejected_nodata > 0,
+        "the hole should have suppressed some maxima"
+    );
+    for f in out.as_slice() {
+        let k = f.keypoint;
+        // Distance from the keypoint to the hole (rows 39..=50, cols 29..=60 after slope masking).
+        let dx = (29.0 - k.x_px).max(k.x_px - 60.0).max(0.0);
+        let dy = (39.0 - k.y_px).max(k.y_px - 50.0).max(0.0);
+        assert!(dx.hypot(dy) > 4.0, "keypoint {k:?} sits on the hole");
+    }
+}
+
+/// FNV-1a over the bits of every keypoint field and descriptor value.
+fn hash_features<const N: usize>(f: &Features<N>) -> u64 {
+    let mut h = 0xcbf2_9ce4_8422_2325u64;
+    let mut eat = |bits: u32| {
+        for b in bits.to_le_bytes() {
+            h ^= b as u64;
+            h = h.wrapping_mul(0x100_0000_01b3);
+        }
+    };
+    for feat in f.as_slice() {
+        let k = feat.keypoint;
+        for v in [k.x_px, k.y_px, k.scale_px, k.orientation_rad, k.response] {
+            eat(v.to_bits());
+        }
+        eat(k.laplacian_positive as u32);
+        for v in feat.descriptor {
+            eat(v.to_bits());
+        }
+    }
+    eat(f.dropped);
+    h
+}
+
+#[test]
+fn same_input_gives_identical_bits() {
+    let (w, h) = (CAP_W, CAP_W);
+    let mut z = vec![0.0f32; w * h];
+    let mut s = 0x1234_5678u32;
+    for (i, v) in z.iter_mut().enumerate() {
+        s ^= s << 13;
+        s ^= s >> 17;
+        s ^= s << 5;
+        let (x, y) = ((i % w) as f32, (i / w) as f32);
+        *v = 40.0 * (x / 6.0).sin() * (y / 8.0).cos() + (s % 1000) as f32 * 0.01;
+    }
+    let dem = DemPatch::new_checked(&z, w, h, 10.0).unwrap();
+    let mut slope = vec![SLOPE_NODATA; w * h];
+    let img = slope_into(&dem, &mut slope).unwrap();
+    let mut hashes = Vec::new();
+    for _ in 0..3 {
+        let mut ws = Box::new(SurfWorkspace::<CAP_PX, CAP_W>::new());
+        let mut out = Features::<48>::new();
+        extract(&img, &SurfConfig::default(), ws.scratch(), &mut out).unwrap();
+        assert!(out.len() > 10, "scene should give features");
+        hashes.push(hash_features(&out));
+    }
+    assert!(hashes.windows(2).all(|p| p[0] == p[1]));
+    println!("feature hash {:016x}", hashes[0]);
+}
