@@ -235,3 +235,50 @@ pub fn render_slope(field: &CraterField, pose: &FramePose, w: usize, h: usize) -
     }
     out
 }
+
+/// Bilinear resampling of a slope image: output pixel `(col, row)` takes the source value at
+/// `map(col, row)` (source pixel coordinates). No data where any of the four neighbours is no data
+/// or the point falls outside the source.
+pub fn resample_slope(
+    src: &[SlopePx],
+    sw: usize,
+    sh: usize,
+    ow: usize,
+    oh: usize,
+    map: impl Fn(f64, f64) -> (f64, f64),
+) -> Vec<SlopePx> {
+    use nav_core::frame::{slope_from_deg, slope_to_deg};
+    let mut out = vec![nav_core::SLOPE_NODATA; ow * oh];
+    for row in 0..oh {
+        for col in 0..ow {
+            let (x, y) = map(col as f64, row as f64);
+            if !(x >= 0.0 && y >= 0.0 && x <= (sw - 1) as f64 && y <= (sh - 1) as f64) {
+                continue;
+            }
+            let (x0, y0) = (
+                (x.floor() as usize).min(sw - 2),
+                (y.floor() as usize).min(sh - 2),
+            );
+            let (fx, fy) = (x - x0 as f64, y - y0 as f64);
+            let v = |c: usize, r: usize| slope_to_deg(src[r * sw + c]);
+            if let (Some(a), Some(b), Some(c), Some(d)) =
+                (v(x0, y0), v(x0 + 1, y0), v(x0, y0 + 1), v(x0 + 1, y0 + 1))
+            {
+                let top = a as f64 * (1.0 - fx) + b as f64 * fx;
+                let bot = c as f64 * (1.0 - fx) + d as f64 * fx;
+                out[row * ow + col] = slope_from_deg((top * (1.0 - fy) + bot * fy) as f32);
+            }
+        }
+    }
+    out
+}
+
+/// Add zero-mean Gaussian noise of `sigma_deg` to every valid slope pixel (sensor noise).
+pub fn add_slope_noise(px: &mut [SlopePx], sigma_deg: f64, rng: &mut SplitMix64) {
+    use nav_core::frame::{slope_from_deg, slope_to_deg};
+    for p in px.iter_mut() {
+        if let Some(d) = slope_to_deg(*p) {
+            *p = slope_from_deg((d as f64 + sigma_deg * rng.normal()) as f32);
+        }
+    }
+}

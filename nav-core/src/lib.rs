@@ -13,6 +13,13 @@
 //!    sub-scale Newton refinement.
 //! 4. [`describe`]: orientation (sliding 60° window) and 64-d descriptor.
 //! 5. [`surf::extract`] ties these together and keeps the `N` strongest keypoints.
+//! 6. [`matching`]: exhaustive SSD against the reference [`tile::Tile`] (Laplacian-sign gate,
+//!    distance threshold, ratio test, mutual check).
+//! 7. [`msac`]: 3-point affine MSAC with a seeded PRNG and a fixed iteration budget, then
+//!    least-squares affine on the inliers (eq 18).
+//! 8. [`pose`]: rotation and scale (eq 19), position in tile pixels and geo metres, covariance,
+//!    and the quality gate (`Fix` or a typed [`pose::NoFix`]).
+//! 9. [`navigator::Navigator`]: one call per frame with a caller-owned [`navigator::NavWorkspace`].
 //!
 //! ## Rules this crate keeps
 //!
@@ -32,6 +39,8 @@
 
 #![no_std]
 #![forbid(unsafe_code)]
+// `!(x <= limit)` is deliberate throughout: a NaN must fail every acceptance test.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
 // Flight code must not hide panics behind these.
 #![cfg_attr(
     not(test),
@@ -50,10 +59,21 @@ pub mod describe;
 pub mod detector;
 pub mod frame;
 pub mod integral;
+pub mod matching;
+pub mod msac;
+pub mod navigator;
+pub mod pose;
+pub mod rng;
 pub mod slope;
 pub mod surf;
+pub mod tile;
 
 pub use describe::{DESCRIPTOR_LEN, Descriptor};
 pub use detector::{DetectorConfig, Keypoint};
 pub use frame::{DemPatch, FrameError, SLOPE_NODATA, SlopeBuffer, SlopeImage, SlopePx};
+pub use matching::{Match, MatchConfig};
+pub use msac::{Affine, MsacConfig};
+pub use navigator::{FrameReport, NavConfig, NavError, NavWorkspace, Navigator, Prior};
+pub use pose::{Fix, GateConfig, NoFix};
 pub use surf::{Feature, Features, SurfConfig, SurfError, SurfWorkspace, extract};
+pub use tile::{Tile, TileError, TileHeader};

@@ -1,0 +1,433 @@
+//! One call per frame: DEM patch (or slope image) in, fix or typed no-fix out, against a
+//! reference tile, with a caller-owned workspace.
+
+use crate::frame::{DemPatch, FrameError, SlopeBuffer, SlopeImage};
+use crate::matching::{Match, MatchConfig, MatchStats, match_features};
+use crate::msac::{Affine, Correspondence, MsacConfig, msac};
+use crate::pose::{Fix, GateConfig, NoFix, make_fix};
+use crate::surf::{Features, SurfConfig, SurfError, SurfWorkspace, extract};
+use crate::tile::Tile;
+use core::fmt;
+
+/// Smallest keypoint scale the detector produces, pixels (σ of layer 15's lower half-step).
+const SMALLEST_SCALE_PX: f32 = 2.5;
+
+/// Predicted pose with uncertainty, to restrict matching to the predicted footprint.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Prior {
+    /// Predicted frame centre in tile pixels `[x, y]`.
+    pub center_tile_px: [f32; 2],
+    /// 1σ position uncertainty, tile pixels (isotropic).
+    pub sigma_px: f32,
+    /// Predicted heading (frame +x axis in tile axes), radians.
+    pub heading_rad: f32,
+    /// 1σ heading uncertainty, radians; ≥ π/4 disables the orientation gate.
+    pub heading_sigma_rad: f32,
+    /// Predicted scale, tile pixels per frame pixel.
+    pub scale: f32,
+    /// 1σ scale uncertainty.
+    pub scale_sigma: f32,
+}
+
+/// Navigator settings.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct NavConfig {
+    /// Descriptor matching.
+    pub matching: MatchConfig,
+    /// Robust estimation.
+    pub msac: MsacConfig,
+    /// Quality gate.
+    pub gate: GateConfig,
+    /// A fix farther than this many combined σ from the prior is refused.
+    pub prior_gate_sigmas: f32,
+    /// When the frame is finer than the tile, ignore frame keypoints smaller than the tile's
+    /// smallest scale (in frame pixels) so the keypoint budget goes to matchable detail.
+    pub auto_min_scale: bool,
+    /// Guided matching after the first consensus: every frame feature is matched to the
+    /// best-SSD tile feature within `guided_radius_px` (tile pixels) of where the transform puts
+    /// it, with a consistent scale and SSD below `guided_max_ssd`; MSAC then runs again on that
+    /// set. The global ratio test rejects many true matches on repetitive crater terrain; near
+    /// the predicted position they are unambiguous, and more inliers mean a better fix. 0
+    /// disables it.
+    pub guided_radius_px: f32,
+    /// SSD limit for guided matches.
+    pub guided_max_ssd: f32,
+}
+
+impl Default for NavConfig {
+    fn default() -> Self {
+        Self {
+            matching: MatchConfig::default(),
+            msac: MsacConfig::default(),
+            gate: GateConfig::default(),
+            prior_gate_sigmas: 5.0,
+            auto_min_scale: true,
+            guided_radius_px: 3.0,
+            guided_max_ssd: 1.0,
+        }
+    }
+}
+
+/// Errors that are not "no fix": the frame or configuration itself is unusable.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum NavError {
+    /// Malformed frame or too large for the workspace.
+    Frame(FrameError),
+    /// SURF refused the frame or configuration.
+    Surf(SurfError),
+}
+
+impl fmt::Display for NavError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::Frame(e) => write!(f, "frame: {e}"),
+            Self::Surf(e) => write!(f, "{e}"),
+        }
+    }
+}
+impl core::error::Error for NavError {}
+impl From<FrameError> for NavError {
+    fn from(e: FrameError) -> Self {
+        Self::Frame(e)
+    }
+}
+impl From<SurfError> for NavError {
+    fn from(e: SurfError) -> Self {
+        Self::Surf(e)
+    }
+}
+
+/// Everything one frame produced.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct FrameReport {
+    /// The fix, or why there is none.
+    pub outcome: Result<Fix, NoFix>,
+    /// Frame features extracted.
+    pub features: u16,
+    /// Frame keypoints dropped by the budget.
+    pub features_dropped: u32,
+    /// Putative matches.
+    pub matches: u16,
+    /// MSAC inliers (0 if MSAC did not run).
+    pub inliers: u16,
+    /// MSAC samples drawn.
+    pub msac_iterations: u16,
+    /// The MSAC affine even when the gate refused it (diagnostics), if MSAC ran.
+    pub affine: Option<Affine>,
+    /// Matching counters.
+    pub match_stats: MatchStats,
+}
+
+/// Caller-owned working memory for one frame: slope buffer, SURF scratch, up to `MAX_KP` frame
+/// features and `MAX_MATCHES` matches. See `docs/bounds.md` for its size.
+pub struct NavWorkspace<
+    const MAX_PX: usize,
+    const MAX_W: usize,
+    const MAX_KP: usize,
+    const MAX_MATCHES: usize,
+> {
+    slope: SlopeBuffer<MAX_PX>,
+    surf: SurfWorkspace<MAX_PX, MAX_W>,
+    features: Features<MAX_KP>,
+    matches: heapless::Vec<Match, MAX_MATCHES>,
+    pts: [Correspondence; MAX_MATCHES],
+    inlier: [bool; MAX_MATCHES],
+}
+
+impl<const MAX_PX: usize, const MAX_W: usize, const MAX_KP: usize, const MAX_MATCHES: usize> Default
+    for NavWorkspace<MAX_PX, MAX_W, MAX_KP, MAX_MATCHES>
+{
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl<const MAX_PX: usize, const MAX_W: usize, const MAX_KP: usize, const MAX_MATCHES: usize>
+    NavWorkspace<MAX_PX, MAX_W, MAX_KP, MAX_MATCHES>
+{
+    /// Zeroed workspace (`const`, so it can be a `static`).
+    pub const fn new() -> Self {
+        Self {
+            slope: SlopeBuffer::new(),
+            surf: SurfWorkspace::new(),
+            features: Features::new(),
+            matches: heapless::Vec::new(),
+            pts: [Correspondence {
+                x: 0.0,
+                y: 0.0,
+                tx: 0.0,
+                ty: 0.0,
+                scale: 1.0,
+            }; MAX_MATCHES],
+            inlier: [false; MAX_MATCHES],
+        }
+    }
+    /// Size in bytes.
+    pub const fn footprint_bytes() -> usize {
+        core::mem::size_of::<Self>()
+    }
+    /// The frame features of the last call (frame pixel coordinates).
+    pub fn features(&self) -> &Features<MAX_KP> {
+        &self.features
+    }
+    /// The putative matches of the last call.
+    pub fn matches(&self) -> &[Match] {
+        &self.matches
+    }
+    /// MSAC inlier flags of the last call, parallel to [`Self::matches`].
+    pub fn inliers(&self) -> &[bool] {
+        self.inlier.get(..self.matches.len()).unwrap_or(&[])
+    }
+}
+
+/// Matches frames against one reference tile.
+#[derive(Debug, Clone, Copy)]
+pub struct Navigator<'t> {
+    tile: Tile<'t>,
+    cfg: NavConfig,
+}
+
+impl<'t> Navigator<'t> {
+    /// Navigator over a parsed tile.
+    pub fn new(tile: Tile<'t>, cfg: NavConfig) -> Self {
+        Self { tile, cfg }
+    }
+    /// The tile.
+    pub fn tile(&self) -> &Tile<'t> {
+        &self.tile
+    }
+    /// The configuration.
+    pub fn config(&self) -> &NavConfig {
+        &self.cfg
+    }
+
+    /// SURF settings for a frame of `frame_pixel_m` metres per pixel: the tile's, with the
+    /// minimum scale raised for frames finer than the tile.
+    pub fn frame_surf_config(&self, frame_pixel_m: f32) -> SurfConfig {
+        let mut cfg = self.tile.header().surf_config();
+        let ratio = self.tile.header().pixel_m() as f32 / frame_pixel_m;
+        cfg.detector.min_scale_px = if self.cfg.auto_min_scale && ratio > 1.0 {
+            cfg.detector.min_scale_px.max(SMALLEST_SCALE_PX) * ratio
+        } else {
+            0.0
+        };
+        cfg
+    }
+
+    /// Locate a DEM patch (heights in metres): slope, SURF, match, MSAC, gate.
+    pub fn locate_dem<const P: usize, const W: usize, const K: usize, const M: usize>(
+        &self,
+        ws: &mut NavWorkspace<P, W, K, M>,
+        dem: &DemPatch<'_>,
+        prior: Option<&Prior>,
+    ) -> Result<FrameReport, NavError> {
+        let NavWorkspace {
+            slope,
+            surf,
+            features,
+            ..
+        } = ws;
+        let img = slope.compute_from(dem)?;
+        let cfg = self.frame_surf_config(img.pixel_m());
+        extract(&img, &cfg, surf.scratch(), features)?;
+        let (w, h) = (img.width(), img.height());
+        Ok(self.locate_features(ws, w, h, prior))
+    }
+
+    /// Locate a slope image.
+    pub fn locate_slope<const P: usize, const W: usize, const K: usize, const M: usize>(
+        &self,
+        ws: &mut NavWorkspace<P, W, K, M>,
+        img: &SlopeImage<'_>,
+        prior: Option<&Prior>,
+    ) -> Result<FrameReport, NavError> {
+        let cfg = self.frame_surf_config(img.pixel_m());
+        extract(img, &cfg, ws.surf.scratch(), &mut ws.features)?;
+        Ok(self.locate_features(ws, img.width(), img.height(), prior))
+    }
+
+    /// Fill the correspondences from the match list and run MSAC on them.
+    fn consensus<const P: usize, const W: usize, const K: usize, const M: usize>(
+        &self,
+        ws: &mut NavWorkspace<P, W, K, M>,
+    ) -> Option<crate::msac::MsacResult> {
+        let feats = ws.features.as_slice();
+        for (m, slot) in ws.matches.iter().zip(ws.pts.iter_mut()) {
+            let tk = self.tile.keypoint(m.tile as usize);
+            if let Some(f) = feats.get(m.frame as usize) {
+                *slot = Correspondence {
+                    x: f.keypoint.x_px,
+                    y: f.keypoint.y_px,
+                    tx: tk.x_px,
+                    ty: tk.y_px,
+                    scale: tk.scale_px,
+                };
+            }
+        }
+        let pts = ws.pts.get(..ws.matches.len())?;
+        msac(pts, &mut ws.inlier, &self.cfg.msac)
+    }
+
+    /// Replace the match list by guided matches under `affine`; false if too few were found.
+    fn guided_matches<const P: usize, const W: usize, const K: usize, const M: usize>(
+        &self,
+        ws: &mut NavWorkspace<P, W, K, M>,
+        affine: &Affine,
+    ) -> bool {
+        let feats = ws.features.as_slice();
+        let tile = &self.tile;
+        let scale = crate::pose::similarity(affine).scale as f32;
+        let r2 = self.cfg.guided_radius_px * self.cfg.guided_radius_px;
+        let mut guided: heapless::Vec<Match, M> = heapless::Vec::new();
+        for (i, f) in feats.iter().enumerate().take(u16::MAX as usize) {
+            let (px, py) = affine.apply(f.keypoint.x_px as f64, f.keypoint.y_px as f64);
+            let (px, py) = (px as f32, py as f32);
+            let expect_scale = f.keypoint.scale_px * scale;
+            let mut best: Option<(f32, usize)> = None;
+            for j in 0..tile.len().min(u16::MAX as usize) {
+                let k = tile.keypoint(j);
+                let (dx, dy) = (k.x_px - px, k.y_px - py);
+                if dx * dx + dy * dy > r2 || k.laplacian_positive != f.keypoint.laplacian_positive {
+                    continue;
+                }
+                let ratio = k.scale_px / expect_scale;
+                if !(0.67..=1.5).contains(&ratio) {
+                    continue;
+                }
+                let bound = best.map_or(self.cfg.guided_max_ssd, |b| b.0);
+                let d = crate::matching::ssd_to_tile(&f.descriptor, tile, j, bound);
+                if d <= bound && best.is_none_or(|b| d < b.0) {
+                    best = Some((d, j));
+                }
+            }
+            if let Some((ssd, j)) = best {
+                // A full list keeps the first M frame features (strongest first).
+                let _ = guided.push(Match {
+                    frame: i as u16,
+                    tile: j as u16,
+                    ssd,
+                });
+            }
+        }
+        if guided.len() < self.cfg.gate.min_matches as usize {
+            return false;
+        }
+        ws.matches = guided;
+        true
+    }
+
+    fn locate_features<const P: usize, const W: usize, const K: usize, const M: usize>(
+        &self,
+        ws: &mut NavWorkspace<P, W, K, M>,
+        frame_w: usize,
+        frame_h: usize,
+        prior: Option<&Prior>,
+    ) -> FrameReport {
+        let feats = ws.features.as_slice();
+        let mut report = FrameReport {
+            outcome: Err(NoFix::TooFewFeatures),
+            features: feats.len() as u16,
+            features_dropped: ws.features.dropped,
+            matches: 0,
+            inliers: 0,
+            msac_iterations: 0,
+            affine: None,
+            match_stats: MatchStats::default(),
+        };
+        ws.matches.clear();
+        if feats.len() < self.cfg.gate.min_matches as usize {
+            return report;
+        }
+        let tile = &self.tile;
+        // Prior footprint: tile features within the frame's predicted half-diagonal (at the
+        // largest plausible scale) plus 3σ of position.
+        let footprint = prior.map(|p| {
+            let half_diag = 0.5 * libm::hypotf(frame_w as f32, frame_h as f32);
+            let scale_hi = p.scale + 3.0 * p.scale_sigma.abs();
+            let r = half_diag * scale_hi + 3.0 * p.sigma_px.abs();
+            (p.center_tile_px, r * r)
+        });
+        let use_tile = |j: usize| match footprint {
+            None => true,
+            Some(([cx, cy], r2)) => {
+                let k = tile.keypoint(j);
+                let (dx, dy) = (k.x_px - cx, k.y_px - cy);
+                dx * dx + dy * dy <= r2
+            }
+        };
+        report.match_stats =
+            match_features(feats, tile, &self.cfg.matching, use_tile, &mut ws.matches);
+        // Orientation gate from the prior heading: a true match's orientations differ by the heading.
+        let upright = tile.header().upright;
+        if let Some(p) = prior
+            && !upright
+            && p.heading_sigma_rad < core::f32::consts::FRAC_PI_4
+        {
+            let tol = (3.0 * p.heading_sigma_rad).max(0.35);
+            ws.matches.retain(|m| {
+                let fo = feats
+                    .get(m.frame as usize)
+                    .map_or(0.0, |f| f.keypoint.orientation_rad);
+                let to = tile.keypoint(m.tile as usize).orientation_rad;
+                let d = libm::remainderf(to - fo - p.heading_rad, core::f32::consts::TAU);
+                libm::fabsf(d) <= tol
+            });
+        }
+        report.matches = ws.matches.len() as u16;
+        if ws.matches.len() < self.cfg.gate.min_matches as usize {
+            report.outcome = Err(NoFix::TooFewMatches);
+            return report;
+        }
+        let Some(mut r) = self.consensus(ws) else {
+            report.outcome = Err(NoFix::TooFewInliers);
+            return report;
+        };
+        if self.cfg.guided_radius_px > 0.0 && self.guided_matches(ws, &r.affine) {
+            match self.consensus(ws) {
+                Some(g) if g.inliers >= r.inliers => r = g,
+                // Cannot happen in practice (the first inliers are among the guided candidates);
+                // if it does, the frame is inconsistent and no fix is the safe answer.
+                _ => {
+                    report.outcome = Err(NoFix::TooFewInliers);
+                    return report;
+                }
+            }
+            report.matches = ws.matches.len() as u16;
+        }
+        let n = ws.matches.len();
+        let pts = ws.pts.get(..n).unwrap_or(&[]);
+        report.inliers = r.inliers;
+        report.msac_iterations = r.iterations;
+        report.affine = Some(r.affine);
+        let inlier_pts = pts
+            .iter()
+            .zip(ws.inlier.iter())
+            .filter(|(_, f)| **f)
+            .map(|(p, _)| (p.x, p.y));
+        let mut outcome = make_fix(
+            &r,
+            tile.header(),
+            frame_w,
+            frame_h,
+            &self.cfg.gate,
+            inlier_pts,
+        );
+        if let (Ok(fix), Some(p)) = (&outcome, prior) {
+            let (dx, dy) = (
+                fix.center_tile_px[0] - p.center_tile_px[0] as f64,
+                fix.center_tile_px[1] - p.center_tile_px[1] as f64,
+            );
+            let var = (p.sigma_px as f64) * (p.sigma_px as f64) + fix.center_cov_tile_px2[0][0];
+            let gate = self.cfg.prior_gate_sigmas as f64;
+            if dx * dx + dy * dy > gate * gate * var {
+                outcome = Err(NoFix::InconsistentWithPrior);
+            }
+        }
+        report.outcome = outcome;
+        report
+    }
+}

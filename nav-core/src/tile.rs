@@ -1,0 +1,416 @@
+//! Reference tile: a versioned, checksummed, little-endian blob of SURF features with its
+//! geo-reference, read in place (from flash) without copying or allocating.
+//!
+//! Layout (all integers and floats little-endian; the prose spec with byte tables is
+//! `docs/tile-format.md`):
+//!
+//! | offset | size | field |
+//! |---|---|---|
+//! | 0 | 8 | magic `UMBRATIL` |
+//! | 8 | 2 | format version ([`TILE_FORMAT_VERSION`]) |
+//! | 10 | 2 | header length `H` in bytes |
+//! | 12 | 4 | feature count `N` |
+//! | 16 | H | header, postcard-encoded [`TileHeader`] |
+//! | 16 + H | pad | zeros up to a multiple of 4 |
+//! | K | 24·N | keypoints ([`KEYPOINT_RECORD_LEN`] bytes each) |
+//! | K + 24·N | 256·N | descriptors (64 × `f32` each) |
+//! | end − 4 | 4 | CRC-32 (ISO-HDLC, as zlib) of every byte before it |
+
+use crate::describe::{DESCRIPTOR_LEN, Descriptor};
+use crate::detector::{DetectorConfig, Keypoint};
+use crate::surf::{Feature, SurfConfig};
+use core::fmt;
+use serde::{Deserialize, Serialize};
+
+/// Magic bytes at offset 0.
+pub const TILE_MAGIC: [u8; 8] = *b"UMBRATIL";
+/// Format version this code reads and writes.
+pub const TILE_FORMAT_VERSION: u16 = 1;
+/// Bytes before the header.
+pub const PREAMBLE_LEN: usize = 16;
+/// Bytes per keypoint record: x, y, scale, orientation, response (`f32`), flags (`u32`).
+pub const KEYPOINT_RECORD_LEN: usize = 24;
+/// Bytes per descriptor.
+pub const DESCRIPTOR_RECORD_LEN: usize = 4 * DESCRIPTOR_LEN;
+/// Largest header accepted, bytes (the projection note is the only variable part).
+pub const MAX_HEADER_LEN: usize = 512;
+/// Longest projection note, bytes of UTF-8.
+pub const MAX_PROJECTION_LEN: usize = 256;
+/// Most features a tile may hold (indices are `u16` in match lists).
+pub const MAX_TILE_FEATURES: usize = 65_535;
+/// Flag bit: Laplacian sign positive.
+const FLAG_LAPLACIAN_POSITIVE: u32 = 1;
+
+const CRC: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
+
+/// Geo-reference and provenance of a tile.
+///
+/// Geo coordinates of the centre of tile pixel `(col, row)`:
+/// `x_m = origin_x_m + col · pixel_x_m`, `y_m = origin_y_m + row · pixel_y_m` (for a north-up
+/// map `pixel_y_m` is negative). Units are metres of the projection named in `projection`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct TileHeader<'a> {
+    /// Tile width in pixels.
+    pub width_px: u32,
+    /// Tile height in pixels.
+    pub height_px: u32,
+    /// Geo x of the centre of pixel (0, 0), metres.
+    pub origin_x_m: f64,
+    /// Geo y of the centre of pixel (0, 0), metres.
+    pub origin_y_m: f64,
+    /// Geo x step per column, metres.
+    pub pixel_x_m: f64,
+    /// Geo y step per row, metres (negative for north-up).
+    pub pixel_y_m: f64,
+    /// Free-text projection note (e.g. a PROJ string or EPSG code), at most
+    /// [`MAX_PROJECTION_LEN`] bytes.
+    pub projection: &'a str,
+    /// Number of features (must equal the preamble's count).
+    pub feature_count: u32,
+    /// Detector octaves used for the tile.
+    pub octaves: u8,
+    /// Detector layers per octave.
+    pub layers: u8,
+    /// Detector threshold, (degrees of slope)².
+    pub threshold: f32,
+    /// Smallest keypoint scale kept, tile pixels.
+    pub min_scale_px: f32,
+    /// Whether orientations were assigned (false) or all zero (upright).
+    pub upright: bool,
+}
+
+impl TileHeader<'_> {
+    /// The SURF settings the tile was built with (frames should use the same).
+    pub fn surf_config(&self) -> SurfConfig {
+        SurfConfig {
+            detector: DetectorConfig {
+                octaves: self.octaves,
+                layers: self.layers,
+                threshold: self.threshold,
+                min_scale_px: self.min_scale_px,
+            },
+            upright: self.upright,
+        }
+    }
+    /// Geo coordinates (metres) of tile pixel coordinates `(x_px, y_px)`.
+    pub fn pixel_to_geo(&self, x_px: f64, y_px: f64) -> (f64, f64) {
+        (
+            self.origin_x_m + x_px * self.pixel_x_m,
+            self.origin_y_m + y_px * self.pixel_y_m,
+        )
+    }
+    /// Mean ground sample distance, metres per pixel.
+    pub fn pixel_m(&self) -> f64 {
+        0.5 * (libm::fabs(self.pixel_x_m) + libm::fabs(self.pixel_y_m))
+    }
+}
+
+/// Why a tile blob was refused.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum TileError {
+    /// Shorter than the fixed parts, or its length disagrees with the counts.
+    Truncated {
+        /// Bytes the counts call for (or the minimum).
+        expected: usize,
+        /// Bytes given.
+        got: usize,
+    },
+    /// Magic bytes wrong: not a tile.
+    BadMagic,
+    /// A format version this code does not read.
+    WrongVersion {
+        /// Version found in the blob.
+        found: u16,
+    },
+    /// CRC-32 mismatch: corrupted in storage or transit.
+    BadChecksum {
+        /// CRC stored in the blob.
+        stored: u32,
+        /// CRC computed over the blob.
+        computed: u32,
+    },
+    /// Header does not decode, or is too long.
+    BadHeader,
+    /// Header values out of range (zero size, non-finite or zero pixel size, count mismatch,
+    /// detector settings out of range, projection note too long).
+    BadGeometry,
+    /// A keypoint or descriptor holds a non-finite value or lies outside the tile.
+    BadFeature {
+        /// Index of the offending feature.
+        index: u32,
+    },
+    /// The output buffer of the writer is too small.
+    BufferTooSmall {
+        /// Bytes needed.
+        needed: usize,
+    },
+}
+
+impl fmt::Display for TileError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::Truncated { expected, got } => {
+                write!(f, "tile truncated: {got} bytes, expected {expected}")
+            }
+            Self::BadMagic => write!(f, "not an Umbra tile (bad magic)"),
+            Self::WrongVersion { found } => write!(
+                f,
+                "tile format version {found}, this build reads {TILE_FORMAT_VERSION}"
+            ),
+            Self::BadChecksum { stored, computed } => write!(
+                f,
+                "tile checksum mismatch: stored {stored:08x}, computed {computed:08x}"
+            ),
+            Self::BadHeader => write!(f, "tile header does not decode"),
+            Self::BadGeometry => write!(f, "tile header values out of range"),
+            Self::BadFeature { index } => write!(f, "tile feature {index} is invalid"),
+            Self::BufferTooSmall { needed } => write!(f, "tile needs a {needed}-byte buffer"),
+        }
+    }
+}
+
+impl core::error::Error for TileError {}
+
+fn rd_u16(b: &[u8], at: usize) -> Option<u16> {
+    Some(u16::from_le_bytes(b.get(at..at + 2)?.try_into().ok()?))
+}
+fn rd_u32(b: &[u8], at: usize) -> Option<u32> {
+    Some(u32::from_le_bytes(b.get(at..at + 4)?.try_into().ok()?))
+}
+fn rd_f32(b: &[u8], at: usize) -> f32 {
+    b.get(at..at + 4)
+        .and_then(|s| s.try_into().ok())
+        .map_or(f32::NAN, f32::from_le_bytes)
+}
+
+const fn align4(n: usize) -> usize {
+    (n + 3) & !3
+}
+
+/// Total blob length for a header of `header_len` bytes and `n` features.
+pub const fn tile_len(header_len: usize, n: usize) -> usize {
+    align4(PREAMBLE_LEN + header_len) + n * (KEYPOINT_RECORD_LEN + DESCRIPTOR_RECORD_LEN) + 4
+}
+
+/// A validated tile, borrowing its bytes (e.g. straight from flash).
+#[derive(Debug, Clone, Copy)]
+pub struct Tile<'a> {
+    header: TileHeader<'a>,
+    keypoints: &'a [u8],
+    descriptors: &'a [u8],
+    count: usize,
+}
+
+impl<'a> Tile<'a> {
+    /// Validate everything once: magic, version, lengths, checksum, header ranges, and every
+    /// keypoint and descriptor value. Afterwards accessors cannot fail.
+    pub fn parse(bytes: &'a [u8]) -> Result<Self, TileError> {
+        let min = PREAMBLE_LEN + 4;
+        if bytes.len() < min {
+            return Err(TileError::Truncated {
+                expected: min,
+                got: bytes.len(),
+            });
+        }
+        if bytes.get(..8) != Some(&TILE_MAGIC[..]) {
+            return Err(TileError::BadMagic);
+        }
+        let bad_len = TileError::Truncated {
+            expected: min,
+            got: bytes.len(),
+        };
+        let version = rd_u16(bytes, 8).ok_or(bad_len)?;
+        if version != TILE_FORMAT_VERSION {
+            return Err(TileError::WrongVersion { found: version });
+        }
+        let header_len = rd_u16(bytes, 10).ok_or(bad_len)? as usize;
+        let count = rd_u32(bytes, 12).ok_or(bad_len)? as usize;
+        if header_len > MAX_HEADER_LEN || count > MAX_TILE_FEATURES {
+            return Err(TileError::BadHeader);
+        }
+        let expected = tile_len(header_len, count);
+        if bytes.len() != expected {
+            return Err(TileError::Truncated {
+                expected,
+                got: bytes.len(),
+            });
+        }
+        let body = bytes.get(..expected - 4).ok_or(bad_len)?;
+        let stored = rd_u32(bytes, expected - 4).ok_or(bad_len)?;
+        let computed = CRC.checksum(body);
+        if stored != computed {
+            return Err(TileError::BadChecksum { stored, computed });
+        }
+        let hbytes = bytes
+            .get(PREAMBLE_LEN..PREAMBLE_LEN + header_len)
+            .ok_or(TileError::BadHeader)?;
+        let (header, rest): (TileHeader<'a>, &[u8]) =
+            postcard::take_from_bytes(hbytes).map_err(|_| TileError::BadHeader)?;
+        if !rest.is_empty() {
+            return Err(TileError::BadHeader);
+        }
+        let finite_nz = |v: f64| v.is_finite() && v != 0.0;
+        let detector_ok = header.surf_config().detector.validate().is_ok();
+        if header.width_px == 0
+            || header.height_px == 0
+            || header.feature_count as usize != count
+            || !finite_nz(header.pixel_x_m)
+            || !finite_nz(header.pixel_y_m)
+            || !header.origin_x_m.is_finite()
+            || !header.origin_y_m.is_finite()
+            || header.projection.len() > MAX_PROJECTION_LEN
+            || !detector_ok
+        {
+            return Err(TileError::BadGeometry);
+        }
+        let kp_start = align4(PREAMBLE_LEN + header_len);
+        let d_start = kp_start + count * KEYPOINT_RECORD_LEN;
+        let keypoints = bytes.get(kp_start..d_start).ok_or(bad_len)?;
+        let descriptors = bytes
+            .get(d_start..d_start + count * DESCRIPTOR_RECORD_LEN)
+            .ok_or(bad_len)?;
+        let tile = Self {
+            header,
+            keypoints,
+            descriptors,
+            count,
+        };
+        let (w, h) = (header.width_px as f32, header.height_px as f32);
+        for i in 0..count {
+            let k = tile.keypoint(i);
+            let inside = k.x_px >= -0.5 && k.y_px >= -0.5 && k.x_px <= w - 0.5 && k.y_px <= h - 0.5;
+            let finite = k.response.is_finite()
+                && k.orientation_rad.is_finite()
+                && k.scale_px.is_finite()
+                && k.scale_px > 0.0;
+            let desc_ok = (0..DESCRIPTOR_LEN).all(|j| tile.descriptor_value(i, j).is_finite());
+            if !(inside && finite && desc_ok) {
+                return Err(TileError::BadFeature { index: i as u32 });
+            }
+        }
+        Ok(tile)
+    }
+
+    /// The header.
+    pub fn header(&self) -> &TileHeader<'a> {
+        &self.header
+    }
+    /// Number of features.
+    pub fn len(&self) -> usize {
+        self.count
+    }
+    /// No features.
+    pub fn is_empty(&self) -> bool {
+        self.count == 0
+    }
+
+    /// Keypoint `i` (tile pixel coordinates); a zeroed keypoint for an index out of range.
+    pub fn keypoint(&self, i: usize) -> Keypoint {
+        let at = i * KEYPOINT_RECORD_LEN;
+        let b = self.keypoints;
+        Keypoint {
+            x_px: rd_f32(b, at),
+            y_px: rd_f32(b, at + 4),
+            scale_px: rd_f32(b, at + 8),
+            orientation_rad: rd_f32(b, at + 12),
+            response: rd_f32(b, at + 16),
+            laplacian_positive: rd_u32(b, at + 20).unwrap_or(0) & FLAG_LAPLACIAN_POSITIVE != 0,
+        }
+    }
+
+    /// Component `j` of descriptor `i` (NaN out of range, which `parse` rules out for valid
+    /// indices).
+    #[inline]
+    pub fn descriptor_value(&self, i: usize, j: usize) -> f32 {
+        rd_f32(self.descriptors, (i * DESCRIPTOR_LEN + j) * 4)
+    }
+
+    /// The raw little-endian bytes of descriptor `i` (empty out of range).
+    #[inline]
+    pub fn descriptor_bytes(&self, i: usize) -> &'a [u8] {
+        let at = i * DESCRIPTOR_RECORD_LEN;
+        self.descriptors
+            .get(at..at + DESCRIPTOR_RECORD_LEN)
+            .unwrap_or(&[])
+    }
+
+    /// Descriptor `i` decoded into an array.
+    pub fn descriptor(&self, i: usize) -> Descriptor {
+        let mut d = [0.0f32; DESCRIPTOR_LEN];
+        for (j, v) in d.iter_mut().enumerate() {
+            *v = self.descriptor_value(i, j);
+        }
+        d
+    }
+}
+
+/// Serialise a tile into `out`; returns the number of bytes written. No allocation: the ground
+/// side passes a `Vec` sized with [`tile_len`] (header length is known after encoding; passing
+/// `tile_len(MAX_HEADER_LEN, n)` bytes is always enough).
+pub fn write_tile(
+    header: &TileHeader<'_>,
+    features: &[Feature],
+    out: &mut [u8],
+) -> Result<usize, TileError> {
+    if features.len() > MAX_TILE_FEATURES || header.feature_count as usize != features.len() {
+        return Err(TileError::BadGeometry);
+    }
+    if header.projection.len() > MAX_PROJECTION_LEN {
+        return Err(TileError::BadGeometry);
+    }
+    let n = features.len();
+    let too_small = TileError::BufferTooSmall {
+        needed: tile_len(MAX_HEADER_LEN, n),
+    };
+    let hdr_area = out
+        .get_mut(PREAMBLE_LEN..PREAMBLE_LEN + MAX_HEADER_LEN)
+        .ok_or(too_small)?;
+    let header_len = postcard::to_slice(header, hdr_area)
+        .map_err(|_| TileError::BadHeader)?
+        .len();
+    let total = tile_len(header_len, n);
+    let out = out.get_mut(..total).ok_or(too_small)?;
+    fn put(out: &mut [u8], at: usize, bytes: &[u8]) {
+        if let Some(dst) = out.get_mut(at..at + bytes.len()) {
+            dst.copy_from_slice(bytes);
+        }
+    }
+    put(out, 0, &TILE_MAGIC);
+    put(out, 8, &TILE_FORMAT_VERSION.to_le_bytes());
+    put(out, 10, &(header_len as u16).to_le_bytes());
+    put(out, 12, &(n as u32).to_le_bytes());
+    let kp_start = align4(PREAMBLE_LEN + header_len);
+    let pad = kp_start - PREAMBLE_LEN - header_len;
+    put(
+        out,
+        PREAMBLE_LEN + header_len,
+        [0u8; 3].get(..pad).unwrap_or(&[]),
+    );
+    let d_start = kp_start + n * KEYPOINT_RECORD_LEN;
+    for (i, f) in features.iter().enumerate() {
+        let k = &f.keypoint;
+        let at = kp_start + i * KEYPOINT_RECORD_LEN;
+        put(out, at, &k.x_px.to_le_bytes());
+        put(out, at + 4, &k.y_px.to_le_bytes());
+        put(out, at + 8, &k.scale_px.to_le_bytes());
+        put(out, at + 12, &k.orientation_rad.to_le_bytes());
+        put(out, at + 16, &k.response.to_le_bytes());
+        let flags = if k.laplacian_positive {
+            FLAG_LAPLACIAN_POSITIVE
+        } else {
+            0
+        };
+        put(out, at + 20, &flags.to_le_bytes());
+        for (j, v) in f.descriptor.iter().enumerate() {
+            put(
+                out,
+                d_start + (i * DESCRIPTOR_LEN + j) * 4,
+                &v.to_le_bytes(),
+            );
+        }
+    }
+    let crc = CRC.checksum(out.get(..total - 4).unwrap_or(&[]));
+    put(out, total - 4, &crc.to_le_bytes());
+    Ok(total)
+}

@@ -1,0 +1,152 @@
+//! MSAC robustness: heavy outlier fractions, and too few true matches must never give a fix.
+
+use nav_core::msac::{Correspondence, Model, MsacConfig, msac};
+use nav_core::pose::{GateConfig, make_fix};
+use nav_core::tile::TileHeader;
+use nav_core::{NoFix, rng::Pcg32};
+
+fn unit(r: &mut Pcg32) -> f64 {
+    r.next_u32() as f64 / 4_294_967_296.0
+}
+
+fn gauss(r: &mut Pcg32) -> f64 {
+    let u = unit(r).max(1e-12);
+    (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * unit(r)).cos()
+}
+
+const HEADER: TileHeader<'static> = TileHeader {
+    width_px: 256,
+    height_px: 256,
+    origin_x_m: 0.0,
+    origin_y_m: 0.0,
+    pixel_x_m: 20.0,
+    pixel_y_m: -20.0,
+    projection: "",
+    feature_count: 0,
+    octaves: 3,
+    layers: 4,
+    threshold: 1.0,
+    min_scale_px: 0.0,
+    upright: false,
+};
+
+/// `n_true` correspondences of X = 0.5·R(θ)·x + t with 0.3 px noise, plus `n_out` random pairs.
+fn scene(seed: u64, n_true: usize, n_out: usize, theta: f64) -> Vec<Correspondence> {
+    let mut r = Pcg32::new(seed, 7);
+    let (s, c) = theta.sin_cos();
+    let mut v = Vec::new();
+    for k in 0..n_true + n_out {
+        let (x, y) = (unit(&mut r) * 200.0, unit(&mut r) * 200.0);
+        let (tx, ty) = if k < n_true {
+            (
+                0.5 * (c * x - s * y) + 120.0 + 0.3 * gauss(&mut r),
+                0.5 * (s * x + c * y) + 60.0 + 0.3 * gauss(&mut r),
+            )
+        } else {
+            (unit(&mut r) * 256.0, unit(&mut r) * 256.0)
+        };
+        v.push(Correspondence {
+            x: x as f32,
+            y: y as f32,
+            tx: tx as f32,
+            ty: ty as f32,
+            scale: 3.0,
+        });
+    }
+    // Shuffle so the true ones are not first (deterministically).
+    for i in (1..v.len()).rev() {
+        let j = r.below(i as u32 + 1) as usize;
+        v.swap(i, j);
+    }
+    v
+}
+
+#[test]
+fn seventy_percent_outliers_are_rejected() {
+    for model in [Model::Similarity, Model::Affine] {
+        let cfg = MsacConfig {
+            model,
+            ..MsacConfig::default()
+        };
+        let mut worst = 0.0f64;
+        for seed in 0..20u64 {
+            let theta = (seed as f64 * 37.0).to_radians();
+            let pts = scene(seed, 30, 70, theta);
+            let mut inl = vec![false; pts.len()];
+            let r = msac(&pts, &mut inl, &cfg).expect("consensus");
+            let fix = make_fix(
+                &r,
+                &HEADER,
+                200,
+                200,
+                &GateConfig::default(),
+                pts.iter()
+                    .zip(&inl)
+                    .filter(|(_, f)| **f)
+                    .map(|(p, _)| (p.x, p.y)),
+            )
+            .expect("fix");
+            let mut err = (fix.similarity.rotation_rad - theta)
+                .to_degrees()
+                .rem_euclid(360.0);
+            if err > 180.0 {
+                err = 360.0 - err;
+            }
+            assert!(
+                (fix.similarity.scale / 0.5 - 1.0).abs() < 0.01,
+                "{model:?} seed {seed}: scale {}",
+                fix.similarity.scale
+            );
+            assert!(
+                r.inliers >= 27 && r.inliers <= 33,
+                "{model:?} seed {seed}: {} inliers",
+                r.inliers
+            );
+            worst = worst.max(err);
+        }
+        println!(
+            "{model:?}: 30 true + 70 outliers, worst rotation error {worst:.3}° over 20 seeds"
+        );
+        assert!(worst < 0.3);
+    }
+}
+
+#[test]
+fn fewer_than_three_true_matches_never_fix() {
+    let mut fixes = 0;
+    let mut reasons = std::collections::BTreeMap::new();
+    for model in [Model::Similarity, Model::Affine] {
+        let cfg = MsacConfig {
+            model,
+            ..MsacConfig::default()
+        };
+        for seed in 0..300u64 {
+            let n_true = (seed % 3) as usize; // 0, 1 or 2 true matches
+            let pts = scene(1000 + seed, n_true, 10 + (seed % 40) as usize, 0.7);
+            let mut inl = vec![false; pts.len()];
+            let outcome = match msac(&pts, &mut inl, &cfg) {
+                None => Err(NoFix::TooFewInliers),
+                Some(r) => make_fix(
+                    &r,
+                    &HEADER,
+                    200,
+                    200,
+                    &GateConfig::default(),
+                    pts.iter()
+                        .zip(&inl)
+                        .filter(|(_, f)| **f)
+                        .map(|(p, _)| (p.x, p.y)),
+                ),
+            };
+            match outcome {
+                Ok(f) => {
+                    fixes += 1;
+                    println!("false fix: {model:?} seed {seed}: {f:?}");
+                }
+                Err(e) => *reasons.entry(format!("{e:?}")).or_insert(0) += 1,
+            }
+        }
+    }
+    println!("600 trials with < 3 true matches: no-fix reasons {reasons:?}");
+    assert_eq!(fixes, 0);
+}

@@ -1,0 +1,177 @@
+//! Tile format: golden bytes, round trip, and every kind of damage gives its typed error.
+
+use nav_core::tile::{TILE_FORMAT_VERSION, Tile, TileError, TileHeader, tile_len, write_tile};
+use nav_core::{DESCRIPTOR_LEN, Feature, Keypoint};
+use proptest::prelude::*;
+
+fn header(n: usize) -> TileHeader<'static> {
+    TileHeader {
+        width_px: 200,
+        height_px: 150,
+        origin_x_m: 75_360.0,
+        origin_y_m: 39_640.0,
+        pixel_x_m: 20.0,
+        pixel_y_m: -20.0,
+        projection: "polar stereographic south, R=1737400",
+        feature_count: n as u32,
+        octaves: 3,
+        layers: 4,
+        threshold: 1.0,
+        min_scale_px: 0.0,
+        upright: false,
+    }
+}
+
+fn feature(i: usize) -> Feature {
+    let mut descriptor = [0.0f32; DESCRIPTOR_LEN];
+    for (j, v) in descriptor.iter_mut().enumerate() {
+        *v = ((i * 64 + j) as f32 * 0.37).sin() * 0.125;
+    }
+    Feature {
+        keypoint: Keypoint {
+            x_px: 10.25 + i as f32 * 3.5,
+            y_px: 20.5 + i as f32,
+            scale_px: 2.75,
+            orientation_rad: 1.5,
+            response: 4.0 + i as f32,
+            laplacian_positive: i % 2 == 1,
+        },
+        descriptor,
+    }
+}
+
+fn build(n: usize) -> Vec<u8> {
+    let feats: Vec<Feature> = (0..n).map(feature).collect();
+    let mut buf = vec![0u8; tile_len(512, n)];
+    let len = write_tile(&header(n), &feats, &mut buf).unwrap();
+    buf.truncate(len);
+    buf
+}
+
+fn hex(b: &[u8]) -> String {
+    b.iter().map(|x| format!("{x:02x}")).collect()
+}
+
+/// The first 72 bytes (preamble, header start) and the CRC of a one-feature tile, as written by format version 1.
+/// A change here is a format change: bump `TILE_FORMAT_VERSION` and `docs/tile-format.md`.
+const GOLDEN_HEAD: &str = "554d42524154494c0100550001000000c8019601000000000066f24000000000005be340000000000000344000000000000034c024706f6c61722073746572656f67726170686963";
+const GOLDEN_CRC: &str = "c26a9007";
+
+#[test]
+fn golden_bytes() {
+    let t = build(1);
+    assert_eq!(t.len(), 388);
+    assert_eq!(t.len(), tile_len(t[10] as usize | (t[11] as usize) << 8, 1));
+    assert_eq!(&t[..8], b"UMBRATIL");
+    assert_eq!(u16::from_le_bytes([t[8], t[9]]), TILE_FORMAT_VERSION);
+    assert_eq!(hex(&t[..72]), GOLDEN_HEAD);
+    assert_eq!(hex(&t[t.len() - 4..]), GOLDEN_CRC);
+}
+
+#[test]
+fn round_trip_is_exact() {
+    for n in [0usize, 1, 7] {
+        let bytes = build(n);
+        let tile = Tile::parse(&bytes).unwrap();
+        assert_eq!(*tile.header(), header(n));
+        assert_eq!(tile.len(), n);
+        for i in 0..n {
+            let f = feature(i);
+            assert_eq!(tile.keypoint(i), f.keypoint);
+            assert_eq!(tile.descriptor(i), f.descriptor);
+        }
+    }
+}
+
+fn reseal(b: &mut [u8]) {
+    let n = b.len();
+    let crc = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC).checksum(&b[..n - 4]);
+    b[n - 4..].copy_from_slice(&crc.to_le_bytes());
+}
+
+#[test]
+fn damage_gives_typed_errors() {
+    let good = build(3);
+    // Truncated anywhere.
+    for cut in [0, 10, 19, good.len() - 1] {
+        assert!(
+            matches!(Tile::parse(&good[..cut]), Err(TileError::Truncated { .. })),
+            "cut {cut}"
+        );
+    }
+    // One flipped bit in the body.
+    let mut b = good.clone();
+    b[200] ^= 0x10;
+    assert!(matches!(
+        Tile::parse(&b),
+        Err(TileError::BadChecksum { .. })
+    ));
+    // Wrong magic.
+    let mut b = good.clone();
+    b[0] = b'X';
+    assert_eq!(Tile::parse(&b).unwrap_err(), TileError::BadMagic);
+    // Wrong version (even with a valid checksum).
+    let mut b = good.clone();
+    b[8] = 2;
+    reseal(&mut b);
+    assert_eq!(
+        Tile::parse(&b).unwrap_err(),
+        TileError::WrongVersion { found: 2 }
+    );
+    // A NaN descriptor value behind a valid checksum.
+    let mut b = good.clone();
+    let at = b.len() - 4 - 8;
+    b[at..at + 4].copy_from_slice(&f32::NAN.to_le_bytes());
+    reseal(&mut b);
+    assert_eq!(
+        Tile::parse(&b).unwrap_err(),
+        TileError::BadFeature { index: 2 }
+    );
+    // A keypoint outside the tile.
+    let feats: Vec<Feature> = (0..2)
+        .map(|i| {
+            let mut f = feature(i);
+            f.keypoint.x_px = 500.0;
+            f
+        })
+        .collect();
+    let mut buf = vec![0u8; tile_len(512, 2)];
+    let len = write_tile(&header(2), &feats, &mut buf).unwrap();
+    assert_eq!(
+        Tile::parse(&buf[..len]).unwrap_err(),
+        TileError::BadFeature { index: 0 }
+    );
+    // Header count disagreeing with the features, zero pixel size.
+    assert!(write_tile(&header(5), &feats, &mut buf).is_err());
+    let mut h = header(2);
+    h.pixel_x_m = 0.0;
+    let len = write_tile(&h, &[feature(0), feature(1)], &mut buf).unwrap();
+    assert_eq!(
+        Tile::parse(&buf[..len]).unwrap_err(),
+        TileError::BadGeometry
+    );
+    // Writer buffer too small.
+    let mut small = vec![0u8; 40];
+    assert!(matches!(
+        write_tile(&header(1), &[feature(0)], &mut small),
+        Err(TileError::BufferTooSmall { .. })
+    ));
+}
+
+proptest! {
+    #[test]
+    fn arbitrary_bytes_never_panic(bytes in proptest::collection::vec(any::<u8>(), 0..2048)) {
+        let _ = Tile::parse(&bytes);
+    }
+
+    #[test]
+    fn mutated_tiles_never_panic(pos in 0usize..2000, val in any::<u8>(), reseal_it in any::<bool>()) {
+        let mut b = build(5);
+        let p = pos % b.len();
+        b[p] = val;
+        if reseal_it {
+            reseal(&mut b);
+        }
+        let _ = Tile::parse(&b);
+    }
+}

@@ -1,0 +1,80 @@
+//! Host speed of one full `Navigator` call (slope → SURF → match → MSAC → gate) on a 200 × 200
+//! DEM frame against a 512-feature tile. Scene: seeded analytic crater field; reference at 20 m,
+//! frame at 10 m rotated by 30°.
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use ground_sim::tile::{GeoGrid, build_tile};
+use nav_core::{DemPatch, NavConfig, NavWorkspace, Navigator, SlopeImage, SurfConfig, Tile};
+use std::hint::black_box;
+use umbra_tests::{CraterField, FramePose, render_dem, render_slope};
+
+const W: usize = 200;
+
+fn bench_navigator(c: &mut Criterion) {
+    let field = CraterField::new(7_2023, 8000.0, 1600, 30.0, 500.0);
+    let ref_pose = FramePose {
+        x_m: 0.0,
+        y_m: 0.0,
+        heading_rad: 0.0,
+        pixel_m: 20.0,
+    };
+    let slope = render_slope(&field, &ref_pose, 256, 256);
+    let img = SlopeImage::new_checked(&slope, 256, 256, 20.0).unwrap_or_else(|e| panic!("{e}"));
+    let grid = GeoGrid {
+        origin_x_m: 0.0,
+        origin_y_m: 0.0,
+        pixel_x_m: 20.0,
+        pixel_y_m: 20.0,
+        projection: "bench".into(),
+    };
+    let detector = nav_core::DetectorConfig {
+        threshold: 0.1,
+        ..Default::default()
+    };
+    let cfg = SurfConfig {
+        detector,
+        upright: false,
+    };
+    let tile_bytes = build_tile(&img, &grid, &cfg, 512).unwrap_or_else(|e| panic!("{e}"));
+    let tile = Tile::parse(&tile_bytes).unwrap_or_else(|e| panic!("{e}"));
+    let nav = Navigator::new(tile, NavConfig::default());
+    let pose = FramePose {
+        x_m: 150.0,
+        y_m: -200.0,
+        heading_rad: 30f64.to_radians(),
+        pixel_m: 10.0,
+    };
+    let z = render_dem(&field, &pose, W, W);
+    let dem = DemPatch::new_checked(&z, W, W, 10.0).unwrap_or_else(|e| panic!("{e}"));
+    let mut ws = Box::new(NavWorkspace::<{ W * W }, W, 256, 128>::new());
+    let report = nav
+        .locate_dem(&mut ws, &dem, None)
+        .unwrap_or_else(|e| panic!("{e}"));
+    println!(
+        "tile {} features; frame {} features, {} matches, {} inliers, outcome {}",
+        nav.tile().len(),
+        report.features,
+        report.matches,
+        report.inliers,
+        match report.outcome {
+            Ok(f) => format!(
+                "fix at ({:.1}, {:.1}) px, heading {:.2}°",
+                f.center_tile_px[0],
+                f.center_tile_px[1],
+                f.heading_rad.to_degrees()
+            ),
+            Err(e) => format!("no fix: {e}"),
+        }
+    );
+    c.bench_function("navigator_200x200_vs_512_tile", |b| {
+        b.iter(|| {
+            black_box(
+                nav.locate_dem(&mut ws, black_box(&dem), None)
+                    .map(|r| r.inliers),
+            )
+        })
+    });
+}
+
+criterion_group!(benches, bench_navigator);
+criterion_main!(benches);
