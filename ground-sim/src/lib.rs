@@ -2,3 +2,5 @@
 //!
 //! Terrain in and out, SAR/InSAR simulation, the reference tile builder and closed-loop
 //! evaluation of nav-core. Everything runs on the host with `std`.
+
+pub mod dem;
