@@ -150,11 +150,23 @@ fn read_from<R: Read + Seek>(reader: R) -> Result<Dem, DemError> {
             .collect(),
         DecodingResult::I16(v) => v
             .into_iter()
-            .map(|x| if mask(f64::from(x)) { f32::NAN } else { f32::from(x) })
+            .map(|x| {
+                if mask(f64::from(x)) {
+                    f32::NAN
+                } else {
+                    f32::from(x)
+                }
+            })
             .collect(),
         DecodingResult::U16(v) => v
             .into_iter()
-            .map(|x| if mask(f64::from(x)) { f32::NAN } else { f32::from(x) })
+            .map(|x| {
+                if mask(f64::from(x)) {
+                    f32::NAN
+                } else {
+                    f32::from(x)
+                }
+            })
             .collect(),
         _ => {
             return Err(DemError::Unsupported(format!(
@@ -218,7 +230,10 @@ fn read_georef<R: Read + Seek>(dec: &mut Decoder<R>) -> Result<GeoRef, DemError>
     let (transform, form) = match (scale, tie, matrix) {
         (_, _, Some(m)) => {
             let m: [f64; 16] = m.try_into().map_err(|v: Vec<f64>| {
-                DemError::Format(format!("ModelTransformation has {} values, not 16", v.len()))
+                DemError::Format(format!(
+                    "ModelTransformation has {} values, not 16",
+                    v.len()
+                ))
             })?;
             let t = [
                 m[3] - half * (m[0] + m[1]),
@@ -282,7 +297,11 @@ pub fn write_geotiff_bytes(dem: &Dem, kind: Option<SampleKind>) -> Result<Vec<u8
     Ok(c.into_inner())
 }
 
-fn write_to<W: Write + Seek>(dem: &Dem, w: &mut W, kind: Option<SampleKind>) -> Result<(), DemError> {
+fn write_to<W: Write + Seek>(
+    dem: &Dem,
+    w: &mut W,
+    kind: Option<SampleKind>,
+) -> Result<(), DemError> {
     let kind = kind.unwrap_or(dem.sample);
     let width = u32::try_from(dem.width()).map_err(|_| DemError::Invalid("width".into()))?;
     let height = u32::try_from(dem.height()).map_err(|_| DemError::Invalid("height".into()))?;

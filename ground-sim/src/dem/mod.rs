@@ -11,7 +11,9 @@
 mod geotiff;
 mod resample;
 
-pub use geotiff::{SampleKind, read_geotiff, read_geotiff_bytes, write_geotiff, write_geotiff_bytes};
+pub use geotiff::{
+    SampleKind, read_geotiff, read_geotiff_bytes, write_geotiff, write_geotiff_bytes,
+};
 pub use resample::{Interpolation, resample_to_pixel};
 
 use thiserror::Error;
@@ -273,7 +275,8 @@ impl Dem {
     /// Map extent `(x_min, y_min, x_max, y_max)` in metres of the outer pixel corners.
     pub fn extent_m(&self) -> (f64, f64, f64, f64) {
         let (w, h) = (self.width as f64, self.height as f64);
-        let corners = [(0.0, 0.0), (w, 0.0), (0.0, h), (w, h)].map(|(c, r)| self.geo.transform.apply(c, r));
+        let corners =
+            [(0.0, 0.0), (w, 0.0), (0.0, h), (w, h)].map(|(c, r)| self.geo.transform.apply(c, r));
         let xs = corners.map(|p| p.0);
         let ys = corners.map(|p| p.1);
         let fold_min = |a: [f64; 4]| a.into_iter().fold(f64::INFINITY, f64::min);
@@ -289,7 +292,13 @@ impl Dem {
     /// Crop to the pixels whose centres lie inside the map rectangle `[x_min, x_max] × [y_min,
     /// y_max]` (metres). The result keeps the CRS and pixel size; its corner moves to the first
     /// kept pixel. Errors if the rectangle holds no pixel centre or the grid is rotated.
-    pub fn crop_geo(&self, x_min: f64, y_min: f64, x_max: f64, y_max: f64) -> Result<Dem, DemError> {
+    pub fn crop_geo(
+        &self,
+        x_min: f64,
+        y_min: f64,
+        x_max: f64,
+        y_max: f64,
+    ) -> Result<Dem, DemError> {
         let t = &self.geo.transform;
         if !t.is_north_up() {
             return Err(DemError::Unsupported("cropping a rotated grid".into()));

@@ -26,7 +26,9 @@ const PAD: usize = 2;
 pub fn resample_to_pixel(dem: &Dem, pixel_m: f64, method: Interpolation) -> Result<Dem, DemError> {
     let old_px = dem.pixel_m()?;
     if !(pixel_m.is_finite() && pixel_m > 0.0) {
-        return Err(DemError::Invalid(format!("pixel size {pixel_m} m must be > 0")));
+        return Err(DemError::Invalid(format!(
+            "pixel size {pixel_m} m must be > 0"
+        )));
     }
     let (w, h) = (dem.width(), dem.height());
     if w < 3 || h < 3 {
