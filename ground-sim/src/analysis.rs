@@ -269,26 +269,28 @@ pub struct MainCrater {
     pub centre_col: f64,
     /// Centre row (pixels).
     pub centre_row: f64,
-    /// Rim-crest diameter from the profile maximum, metres.
+    /// Rim-crest diameter (twice the median crest radius), metres.
     pub diameter_m: f64,
-    /// Rim (profile maximum) minus floor (profile minimum), metres.
+    /// Median rim-crest height minus the floor (lowest ring mean), metres.
     pub depth_m: f64,
     /// depth / diameter.
     pub d_over_d: f64,
 }
 
-/// Find the main crater: centre at the lowest point of a box-smoothed DEM, rim at the first
-/// clear maximum of the mean height on rings around it. `None` if the rim would lie outside the rings that fit
-/// mostly (≥ 75 %) inside the DEM, or the profile does not rise by 1 % of its radius.
+/// Find the main crater: centre at the lowest point of a box-smoothed DEM, mid-wall at the
+/// steepest rise of the ring-mean profile, rim crest on rays beyond it. `None` when fewer than
+/// half of the rays find a crest inside the DEM or the crater is shallower than 1 % of its radius.
 pub fn main_crater(dem: &Dem, pixel_m: f64) -> Option<MainCrater> {
     let (w, h) = (dem.width(), dem.height());
     let z = dem.heights_m();
-    // Box smoothing over ~2 % of the size suppresses small pits when locating the centre.
-    let k = (w.min(h) / 50).max(1) as i64;
-    let mut best = (f64::INFINITY, 0usize, 0usize);
-    let step = (k as usize).max(1);
-    for r in (0..h).step_by(step) {
-        for c in (0..w).step_by(step) {
+    // Box smoothing over ~5 % of the size suppresses small pits when locating the centre, which
+    // is searched away from the borders (a low corner is not a crater centre).
+    let k = (w.min(h) / 20).max(1) as i64;
+    let mut best = (f64::INFINITY, h / 2, w / 2);
+    let step = ((k / 2) as usize).max(1);
+    let (mw, mh) = (w / 8, h / 8);
+    for r in (mh..h - mh).step_by(step) {
+        for c in (mw..w - mw).step_by(step) {
             let (mut s, mut n) = (0.0, 0);
             for rr in (r as i64 - k).max(0)..=(r as i64 + k).min(h as i64 - 1) {
                 for cc in (c as i64 - k).max(0)..=(c as i64 + k).min(w as i64 - 1) {
@@ -331,19 +333,54 @@ pub fn main_crater(dem: &Dem, pixel_m: f64) -> Option<MainCrater> {
         }
         prof.push(sum[i] / cnt[i] as f64);
     }
-    // Rim: the first clear local maximum of the profile (max over ±max(2, i/5) rings) that rises
-    // at least half-way from the floor to the highest ring. The global maximum would pick the
-    // regional highs outside the rim (Shackleton sits on a ridge).
     let zmin = prof.iter().copied().fold(f64::INFINITY, f64::min);
-    let ztop = prof.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-    let imax = (2..prof.len()).find(|&i| {
-        let k = (i / 5).max(2);
-        let lo = i.saturating_sub(k);
-        let hi = (i + k).min(prof.len() - 1);
-        hi > i && prof[i] >= zmin + 0.5 * (ztop - zmin) && (lo..=hi).all(|j| prof[j] <= prof[i])
-    })?;
-    let zmax = prof[imax];
-    let diameter_m = 2.0 * imax as f64 * pixel_m;
+    // Mid-wall: the steepest rise of the mean profile. Then, along 72 rays, the rim crest is the
+    // first local maximum beyond it (the global maximum would pick regional highs outside the
+    // rim: Shackleton sits on a ridge). Diameter and rim height are medians over the rays.
+    let i_wall = (1..prof.len())
+        .max_by(|&a, &b| (prof[a] - prof[a - 1]).total_cmp(&(prof[b] - prof[b - 1])))?;
+    let r_wall = i_wall as f64;
+    let k = (r_wall / 10.0).max(2.0);
+    let at = |x: f64, y: f64| -> Option<f64> {
+        if x < 0.0 || y < 0.0 || x > (w - 1) as f64 || y > (h - 1) as f64 {
+            return None;
+        }
+        let (c, r) = (x.floor() as usize, y.floor() as usize);
+        let (c1, r1) = ((c + 1).min(w - 1), (r + 1).min(h - 1));
+        let (tx, ty) = (x - c as f64, y - r as f64);
+        let g = |cc: usize, rr: usize| f64::from(z[rr * w + cc]);
+        let v = (1.0 - ty) * ((1.0 - tx) * g(c, r) + tx * g(c1, r))
+            + ty * ((1.0 - tx) * g(c, r1) + tx * g(c1, r1));
+        v.is_finite().then_some(v)
+    };
+    let mut radii = Vec::new();
+    let mut rims = Vec::new();
+    const RAYS: usize = 72;
+    for a in 0..RAYS {
+        let th = std::f64::consts::TAU * a as f64 / RAYS as f64;
+        let ray: Vec<f64> = (0..)
+            .map(|i| r_wall + 0.5 * i as f64)
+            .take_while(|&r| r <= 3.0 * r_wall)
+            .map_while(|r| at(c0 as f64 + r * th.cos(), r0 as f64 + r * th.sin()))
+            .collect();
+        let kk = (2.0 * k) as usize;
+        let crest = (kk..ray.len().saturating_sub(kk))
+            .find(|&i| (i - kk..=i + kk).all(|j| ray[j] <= ray[i]));
+        if let Some(i) = crest {
+            radii.push(r_wall + 0.5 * i as f64);
+            rims.push(ray[i]);
+        }
+    }
+    if radii.len() < RAYS / 2 {
+        return None;
+    }
+    let median = |v: &mut Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    let imax = median(&mut radii);
+    let zmax = median(&mut rims);
+    let diameter_m = 2.0 * imax * pixel_m;
     let depth_m = zmax - zmin;
     if depth_m < 0.01 * diameter_m / 2.0 {
         return None;

@@ -22,12 +22,7 @@ pub struct Args {
     #[arg(long, value_enum, default_value = "bicubic")]
     pub method: Interpolation,
     /// Crop first to pixels centred in this map rectangle: XMIN,YMIN,XMAX,YMAX (metres).
-    #[arg(
-        long,
-        value_delimiter = ',',
-        num_args = 4,
-        allow_negative_numbers = true
-    )]
+    #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
     pub crop: Option<Vec<f64>>,
     /// Write statistics of the output as JSON here.
     #[arg(long)]
