@@ -1,2 +1,46 @@
-//! `ground-sim` command-line interface.
-fn main() {}
+//! `ground-sim` command-line interface: terrain in and out, pictures and statistics.
+//!
+//! Subcommands live in `src/cli/`, one file each; `Commands` below lists them.
+
+mod cli;
+
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+/// Umbra ground segment: lunar terrain, GeoTIFF DEMs, pictures and statistics.
+#[derive(Debug, Parser)]
+#[command(name = "ground-sim", version, about)]
+struct Cli {
+    #[command(subcommand)]
+    command: Commands,
+}
+
+#[derive(Debug, Subcommand)]
+enum Commands {
+    /// Generate a synthetic lunar terrain preset as a GeoTIFF DEM (and pictures).
+    Terrain(cli::terrain::Args),
+    /// Size, georeferencing, elevation and slope statistics of a DEM.
+    Info(cli::info::Args),
+    /// Resample a DEM to another pixel size and/or crop it by map coordinates.
+    Resample(cli::resample::Args),
+    /// Run everything available end to end into one folder (today: terrain and pictures).
+    Demo(cli::demo::Args),
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match &cli.command {
+        Commands::Terrain(a) => cli::terrain::run(a),
+        Commands::Info(a) => cli::info::run(a),
+        Commands::Resample(a) => cli::resample::run(a),
+        Commands::Demo(a) => cli::demo::run(a),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -1,0 +1,109 @@
+//! Subcommands of the `ground-sim` binary, one file each. To add one: write `cli/NAME.rs` with
+//! an `Args` struct (clap `Args`) and a `run(&Args) -> anyhow::Result<()>`, then add a variant to
+//! `Commands` in `main.rs`.
+
+pub mod demo;
+pub mod info;
+pub mod resample;
+pub mod terrain;
+
+use std::path::Path;
+use std::time::Duration;
+
+use anyhow::Context;
+use indicatif::{ProgressBar, ProgressStyle};
+
+/// A progress bar on stderr for a step of `len` units (hidden when stderr is not a terminal).
+pub fn progress(len: u64, what: &str) -> ProgressBar {
+    let pb = ProgressBar::new(len);
+    let style =
+        ProgressStyle::with_template("{prefix:>10} [{bar:30}] {pos}/{len} {msg} ({elapsed})")
+            .unwrap_or_else(|_| ProgressStyle::default_bar())
+            .progress_chars("=> ");
+    pb.set_style(style);
+    pb.set_prefix(what.to_string());
+    pb.enable_steady_tick(Duration::from_millis(120));
+    pb
+}
+
+/// Write `value` as pretty JSON to `path`, creating parent folders.
+pub fn write_json<T: serde::Serialize>(path: &Path, value: &T) -> anyhow::Result<()> {
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
+    let text = serde_json::to_string_pretty(value)?;
+    std::fs::write(path, text + "\n").with_context(|| format!("writing {}", path.display()))?;
+    Ok(())
+}
+
+/// Create the parent folder of an output file.
+pub fn ensure_parent(path: &Path) -> anyhow::Result<()> {
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
+    Ok(())
+}
+
+/// Print DEM statistics as a two-column table.
+pub fn print_stats(title: &str, s: &ground_sim::analysis::DemStats) {
+    println!("{title}");
+    let rows: Vec<(&str, String)> = vec![
+        ("size", format!("{} x {} px", s.width, s.height)),
+        ("pixel", format!("{} m", s.pixel_m)),
+        (
+            "origin (UL corner)",
+            format!("x {:.3} m, y {:.3} m", s.origin_x_m, s.origin_y_m),
+        ),
+        (
+            "extent",
+            format!(
+                "{:.0} x {:.0} m",
+                s.extent_m[2] - s.extent_m[0],
+                s.extent_m[3] - s.extent_m[1]
+            ),
+        ),
+        ("nodata", format!("{}", s.nodata_count)),
+        (
+            "elevation",
+            format!(
+                "{:.1} .. {:.1} m (mean {:.1}, std {:.1})",
+                s.elev_min_m, s.elev_max_m, s.elev_mean_m, s.elev_std_m
+            ),
+        ),
+        (
+            "slope p50/p90/p99/max",
+            format!(
+                "{:.1} / {:.1} / {:.1} / {:.1} deg",
+                s.slope_p50_deg, s.slope_p90_deg, s.slope_p99_deg, s.slope_max_deg
+            ),
+        ),
+        (
+            "slope < 30 / < 35 deg",
+            format!(
+                "{:.2} % / {:.2} %",
+                100.0 * s.slope_lt30_frac,
+                100.0 * s.slope_lt35_frac
+            ),
+        ),
+    ];
+    let mut rows = rows;
+    if let Some(c) = &s.main_crater {
+        rows.push((
+            "main crater",
+            format!(
+                "D {:.0} m, depth {:.0} m, d/D {:.3}",
+                c.diameter_m, c.depth_m, c.d_over_d
+            ),
+        ));
+    }
+    let deps: Vec<String> = s
+        .depressions
+        .iter()
+        .filter(|b| b.count > 0)
+        .map(|b| format!("{:.0}-{:.0} m: {}", b.d_min_m, b.d_max_m, b.count))
+        .collect();
+    rows.push(("depressions", deps.join(", ")));
+    for (k, v) in rows {
+        println!("  {k:<24} {v}");
+    }
+}
