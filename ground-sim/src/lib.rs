@@ -5,6 +5,8 @@
 
 pub mod analysis;
 pub mod dem;
+pub mod matchplot;
+pub mod register;
 pub mod render;
 pub mod terrain;
 pub mod tile;

@@ -24,6 +24,9 @@ enum Commands {
     Info(cli::info::Args),
     /// Resample a DEM to another pixel size and/or crop it by map coordinates.
     Resample(cli::resample::Args),
+    /// Register a frame image against a reference image with the onboard chain (SURF, matching,
+    /// MSAC, pose) and report rotation, scale, affine and position.
+    Register(cli::register::Args),
     /// Run everything available end to end into one folder (today: terrain and pictures).
     Demo(cli::demo::Args),
 }
@@ -35,6 +38,7 @@ fn main() -> ExitCode {
         Commands::Info(a) => cli::info::run(a),
         Commands::Resample(a) => cli::resample::run(a),
         Commands::Demo(a) => cli::demo::run(a),
+        Commands::Register(a) => cli::register::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -39,8 +39,6 @@
 
 #![no_std]
 #![forbid(unsafe_code)]
-// `!(x <= limit)` is deliberate throughout: a NaN must fail every acceptance test.
-#![allow(clippy::neg_cmp_op_on_partial_ord)]
 // Flight code must not hide panics behind these.
 #![cfg_attr(
     not(test),

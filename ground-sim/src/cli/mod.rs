@@ -4,6 +4,7 @@
 
 pub mod demo;
 pub mod info;
+pub mod register;
 pub mod resample;
 pub mod terrain;
 
