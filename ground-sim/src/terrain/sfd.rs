@@ -158,7 +158,7 @@ pub fn draw_craters<R: rand::Rng>(
 /// Poisson-distributed count with mean `lambda` (Knuth for small means, rounded normal for
 /// large ones).
 fn poisson<R: rand::Rng>(rng: &mut R, lambda: f64) -> usize {
-    if !(lambda > 0.0) {
+    if lambda.is_nan() || lambda <= 0.0 {
         return 0;
     }
     if lambda < 30.0 {
