@@ -211,7 +211,7 @@ pub fn depressions(dem: &Dem, pixel_m: f64) -> Vec<(f64, f64)> {
     let mut out = Vec::new();
     let mut stack = Vec::new();
     for start in 0..w * h {
-        if seen[start] || !(filled[start] - z[start] > 0.0) {
+        if seen[start] || filled[start] - z[start] <= 0.0 || z[start].is_nan() {
             continue;
         }
         seen[start] = true;
@@ -405,7 +405,7 @@ mod tests {
         let (w, h, px) = (64usize, 64usize, 5.0f64);
         let t = 20f64.to_radians().tan();
         let mut z = Vec::new();
-        for r in 0..h {
+        for _row in 0..h {
             for c in 0..w {
                 z.push((c as f64 * px * t) as f32);
             }

@@ -124,7 +124,7 @@ pub fn hillshade(dem: &Dem, sun: Sun) -> Result<Vec<f32>, DemError> {
 
 /// "Nice" tick values covering `[lo, hi]` (steps of 1, 2 or 5 × 10^k, about 4–8 ticks).
 pub fn ticks(lo: f64, hi: f64) -> Vec<f64> {
-    if !(hi > lo) {
+    if hi.partial_cmp(&lo) != Some(std::cmp::Ordering::Greater) {
         return vec![lo];
     }
     let raw = (hi - lo) / 7.0;

@@ -1,5 +1,8 @@
 //! GeoTIFF reading and writing: round trips, real LOLA files, unsupported layouts.
 
+// Test helpers outside #[test] functions may unwrap too: a failure is a test failure.
+#![allow(clippy::unwrap_used)]
+
 use std::io::Cursor;
 use std::path::PathBuf;
 

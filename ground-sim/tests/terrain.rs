@@ -1,5 +1,8 @@
 //! Synthetic terrain: determinism, realism figures, CLI behaviour.
 
+// Test helpers outside #[test] functions may unwrap too: a failure is a test failure.
+#![allow(clippy::unwrap_used)]
+
 use std::process::Command;
 
 use ground_sim::analysis::dem_stats;

@@ -2,20 +2,34 @@
 //! large host crater of each preset.
 //!
 //! Small simple craters, fresh (Pike 1977, "Size-dependence in the shape of fresh impact craters
-//! on the Moon"): rim-to-floor depth `d ≈ 0.196 D`, rim height `h ≈ 0.036 D`; a paraboloid bowl
-//! inside the rim and an ejecta blanket outside whose thickness decays as `(r/R)^-3` (McGetchin,
+//! on the Moon"): rim-to-floor depth `d ≈ 0.196 D`, rim height `h ≈ 0.036 D`; a bowl
+//! (a slightly conical one, see [`FRESH_BOWL_EXP`]) inside the rim and an ejecta blanket outside whose thickness decays as `(r/R)^-3` (McGetchin,
 //! Settle & Head 1973), tapered to zero at 3 R. Degradation is topographic diffusion (Fassett &
 //! Thomson 2014, JGR Planets 119: κ ≈ 5.5 m²/Myr): the radial profile is smoothed by a Gaussian of
 //! σ = sqrt(2 κ t), which lowers the rim, fills the bowl and widens the crater as the real ones do.
 
 use super::sfd::CraterDraw;
 
-/// Topographic diffusivity in m²/Myr (Fassett & Thomson 2014).
+/// Topographic diffusivity in m²/Myr measured on ~3–3.5 Gyr maria (Fassett & Thomson 2014).
 pub const KAPPA_M2_PER_MYR: f64 = 5.5;
+/// Age of the surfaces on which [`KAPPA_M2_PER_MYR`] was calibrated, Gyr.
+const KAPPA_CALIBRATION_AGE_GYR: f64 = 3.5;
+
+/// Diffusivity per flux-equivalent Myr: Fassett & Thomson's value assumed a constant flux over
+/// their surfaces' real age; re-expressed per unit of flux-equivalent time (see
+/// [`super::sfd::flux_equivalent_age_gyr`]) it is `κ · T_cal / τ(T_cal)` ≈ 3.4 m²/Myr.
+pub fn kappa_flux_m2_per_myr() -> f64 {
+    KAPPA_M2_PER_MYR * KAPPA_CALIBRATION_AGE_GYR
+        / super::sfd::flux_equivalent_age_gyr(KAPPA_CALIBRATION_AGE_GYR)
+}
 /// Fresh depth/diameter ratio of simple craters (Pike 1977).
 pub const FRESH_D_OVER_D: f64 = 0.196;
 /// Fresh rim height/diameter ratio of simple craters (Pike 1977).
 pub const FRESH_RIM_OVER_D: f64 = 0.036;
+/// Exponent α of the fresh bowl `z = h − d (1 − ρ^α)`. A paraboloid (α = 2) with d/D = 0.196
+/// would meet the rim at 38°, steeper than the ~30–35° angle of repose that fresh lunar crater
+/// walls show; α = 1.7 puts the steepest wall, at the rim, at 33.7°.
+pub const FRESH_BOWL_EXP: f64 = 1.7;
 /// Outer radius of the ejecta blanket, in crater radii.
 pub const EJECTA_OUTER_R: f64 = 3.0;
 /// Diffusion length σ (in crater radii) at which a crater counts as no longer visible; its
@@ -38,14 +52,14 @@ pub struct CraterStamp {
     pub rho_end: f64,
     /// Heights (metres) at `rho = i / STEPS_PER_R`, up to `rho_end`.
     pub lut: Vec<f32>,
-    /// Age given to the crater, Myr.
+    /// Age given to the crater, flux-equivalent Myr.
     pub age_myr: f64,
 }
 
 /// Fresh profile in units of D for scatter parameters (depth ratio, rim ratio).
 fn fresh(rho: f64, d_ratio: f64, h_ratio: f64) -> f64 {
     if rho <= 1.0 {
-        h_ratio - d_ratio * (1.0 - rho * rho)
+        h_ratio - d_ratio * (1.0 - rho.powf(FRESH_BOWL_EXP))
     } else if rho < EJECTA_OUTER_R {
         let t = ((rho - 2.0) / (EJECTA_OUTER_R - 2.0)).clamp(0.0, 1.0);
         let taper = 1.0 - t * t * (3.0 - 2.0 * t);
@@ -56,10 +70,10 @@ fn fresh(rho: f64, d_ratio: f64, h_ratio: f64) -> f64 {
 }
 
 /// Build the stamp of a drawn crater; `kappa_factor` scales diffusivity (steep host slopes
-/// degrade craters faster), `surface_age_myr` caps its age.
+/// degrade craters faster), `surface_age_myr` (flux-equivalent Myr) caps its age.
 pub fn make_stamp(c: &CraterDraw, kappa_factor: f64, surface_age_myr: f64) -> CraterStamp {
     let r = c.d_m / 2.0;
-    let kappa = KAPPA_M2_PER_MYR * kappa_factor.max(f64::MIN_POSITIVE);
+    let kappa = kappa_flux_m2_per_myr() * kappa_factor.max(f64::MIN_POSITIVE);
     let life_myr = ((SIGMA_VISIBLE_R * r).powi(2) / (2.0 * kappa)).min(surface_age_myr);
     let age_myr = c.u_age * life_myr;
     // ±15 % depth and ±25 % rim scatter about Pike's means (his fits scatter about that much).

@@ -211,8 +211,10 @@ pub fn generate(
     progress.set_length(4);
     progress.set_position(0);
 
-    // Independent streams per component, so changing one model leaves the others unchanged.
-    let mut rng_rim = rand_pcg::Pcg64::seed_from_u64(p.seed ^ 0x5249_4d00);
+    // Independent streams per component (and per preset, so that two presets with one seed do
+    // not share a crater layout); changing one model leaves the others' numbers unchanged.
+    let seed = p.seed ^ (p.preset as u64 + 1).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+    let mut rng_rim = rand_pcg::Pcg64::seed_from_u64(seed ^ 0x5249_4d00);
     let modes: Vec<(f64, f64, f64)> = [(0.015, 2.0), (0.010, 3.0), (0.006, 5.0), (0.004, 7.0)]
         .into_iter()
         .map(|(a, k)| (a, k, std::f64::consts::TAU * rng_rim.random::<f64>()))
@@ -220,7 +222,7 @@ pub fn generate(
     let host = HostProfile::new(host_c, modes);
 
     progress.set_message("fractal roughness");
-    let rough = fractal_field(n, n, px, &model.roughness, p.seed ^ 0x524f_5547);
+    let rough = fractal_field(n, n, px, &model.roughness, seed ^ 0x524f_5547);
     progress.inc(1);
 
     progress.set_message("host crater");
@@ -238,7 +240,7 @@ pub fn generate(
     let d_min = (MIN_CRATER_PX * px).max(MIN_CRATER_M);
     let d_max = (side_m / 2.0).max(2.0 * d_min);
     let margin = d_max / 2.0 * crater::EJECTA_OUTER_R * 1.5;
-    let mut rng_c = rand_pcg::Pcg64::seed_from_u64(p.seed ^ 0x4352_4154);
+    let mut rng_c = rand_pcg::Pcg64::seed_from_u64(seed ^ 0x4352_4154);
     let draws = draw_craters(
         &mut rng_c,
         x0 - margin,
@@ -249,7 +251,7 @@ pub fn generate(
         model.age_gyr,
     );
     let tan30 = 30f64.to_radians().tan();
-    let age_myr = model.age_gyr * 1000.0;
+    let age_myr = sfd::flux_equivalent_age_gyr(model.age_gyr) * 1000.0;
     let stamps: Vec<Option<CraterStamp>> = draws
         .par_iter()
         .map(|c| {

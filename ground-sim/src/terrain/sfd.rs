@@ -39,6 +39,17 @@ pub fn n1_per_km2(age_gyr: f64) -> f64 {
     5.44e-14 * ((6.93 * age_gyr).exp() - 1.0) + 8.38e-4 * age_gyr
 }
 
+/// Present-day production rate of craters ≥ 1 km, per km² per Gyr (the linear term of the
+/// Neukum 1983 chronology).
+pub const N1_RATE_NOW_PER_KM2_GYR: f64 = 8.38e-4;
+
+/// Impact-flux-equivalent age in Gyr: the time the present flux would need to make the crater
+/// density of a surface `age_gyr` old. Degradation by small impacts (diffusion) runs with the
+/// flux, which was far higher before ~3.5 Gyr ago, so diffusion clocks use this age.
+pub fn flux_equivalent_age_gyr(age_gyr: f64) -> f64 {
+    n1_per_km2(age_gyr) / N1_RATE_NOW_PER_KM2_GYR
+}
+
 /// Empirical equilibrium cumulative density per km² (Trask 1966).
 pub fn n_equilibrium_per_km2(d_km: f64) -> f64 {
     EQ_COEFF_PER_KM2 / (d_km * d_km)
@@ -147,7 +158,7 @@ pub fn draw_craters<R: rand::Rng>(
 /// Poisson-distributed count with mean `lambda` (Knuth for small means, rounded normal for
 /// large ones).
 fn poisson<R: rand::Rng>(rng: &mut R, lambda: f64) -> usize {
-    if !(lambda > 0.0) {
+    if lambda.is_nan() || lambda <= 0.0 {
         return 0;
     }
     if lambda < 30.0 {
