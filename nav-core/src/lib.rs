@@ -20,6 +20,7 @@
 //! 8. [`pose`]: rotation and scale (eq 19), position in tile pixels and geo metres, covariance,
 //!    and the quality gate (`Fix` or a typed [`pose::NoFix`]).
 //! 9. [`navigator::Navigator`]: one call per frame with a caller-owned [`navigator::NavWorkspace`].
+//! 10. [`filter::NavFilter`]: error-state Kalman filter fusing IMU propagation with the fixes.
 //!
 //! ## Rules this crate keeps
 //!
@@ -55,6 +56,7 @@ extern crate std;
 
 pub mod describe;
 pub mod detector;
+pub mod filter;
 pub mod frame;
 pub mod integral;
 pub mod matching;

@@ -1,0 +1,369 @@
+//! Error-state Kalman filter fusing IMU propagation with TRN fixes (and altitude).
+//!
+//! Navigation frame: local flat-Moon East-North-Up (x east, y north, z up, metres), gravity
+//! along −z. Body frame: x forward, y left, z up. Nominal state: position, velocity, attitude
+//! (unit quaternion body → nav), accelerometer bias, gyro bias. Error state (15): δp, δv, δθ
+//! (small rotation in the nav frame, `q_true = exp(δθ) ⊗ q`), δb_a, δb_g.
+//!
+//! Yaw ψ is the rotation of the body x axis about +z from +x (east) towards +y (north). A TRN
+//! fix's heading measured in a north-up tile's pixel axes (from +x towards +y = south) is −ψ.
+//!
+//! Everything is `f64`, bounded (fixed-size matrices, no loops beyond their size) and
+//! deterministic. Updates are gated on the normalised innovation squared (NIS).
+
+use core::fmt;
+use nalgebra::{Matrix3, SMatrix, SVector, UnitQuaternion, Vector3};
+
+type Mat15 = SMatrix<f64, 15, 15>;
+
+/// Noise and gating settings.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct FilterConfig {
+    /// Accelerometer white noise density, m/s²/√Hz.
+    pub accel_noise: f64,
+    /// Gyro white noise density, rad/s/√Hz.
+    pub gyro_noise: f64,
+    /// Accelerometer bias random walk, m/s³/√Hz.
+    pub accel_bias_walk: f64,
+    /// Gyro bias random walk, rad/s²/√Hz.
+    pub gyro_bias_walk: f64,
+    /// Lunar gravity magnitude, m/s².
+    pub gravity_mps2: f64,
+    /// NIS gate for a 3-dof TRN fix (x, y, ψ); 16.27 is the 99.9 % point of χ²(3).
+    pub fix_gate_chi2: f64,
+    /// NIS gate for a 1-dof altitude update; 10.83 is the 99.9 % point of χ²(1).
+    pub altitude_gate_chi2: f64,
+    /// Longest accepted propagation step, s.
+    pub max_dt_s: f64,
+}
+
+impl Default for FilterConfig {
+    fn default() -> Self {
+        Self {
+            accel_noise: 3.0e-3,
+            gyro_noise: 5.0e-5,
+            accel_bias_walk: 1.0e-4,
+            gyro_bias_walk: 1.0e-6,
+            gravity_mps2: 1.62,
+            fix_gate_chi2: 16.27,
+            altitude_gate_chi2: 10.83,
+            max_dt_s: 1.0,
+        }
+    }
+}
+
+/// Initial estimate and its 1σ uncertainties.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct InitialState {
+    /// Position, m (ENU).
+    pub position_m: [f64; 3],
+    /// Velocity, m/s (ENU).
+    pub velocity_mps: [f64; 3],
+    /// Yaw ψ, rad (roll and pitch start at 0).
+    pub yaw_rad: f64,
+    /// 1σ position, m (per axis).
+    pub position_sigma_m: f64,
+    /// 1σ velocity, m/s (per axis).
+    pub velocity_sigma_mps: f64,
+    /// 1σ attitude, rad (per axis).
+    pub attitude_sigma_rad: f64,
+    /// 1σ accelerometer bias, m/s².
+    pub accel_bias_sigma: f64,
+    /// 1σ gyro bias, rad/s.
+    pub gyro_bias_sigma: f64,
+}
+
+/// A TRN fix as a measurement in the navigation frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct FixMeasurement {
+    /// East, m.
+    pub x_m: f64,
+    /// North, m.
+    pub y_m: f64,
+    /// Yaw ψ, rad.
+    pub yaw_rad: f64,
+    /// Position covariance, m² (row-major 2 × 2, east/north).
+    pub position_cov_m2: [[f64; 2]; 2],
+    /// 1σ yaw, rad.
+    pub yaw_sigma_rad: f64,
+}
+
+/// What an update did.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum UpdateOutcome {
+    /// Applied; normalised innovation squared.
+    Accepted {
+        /// NIS of the innovation.
+        nis: f64,
+    },
+    /// Refused by the gate (an outlier fix); the state is unchanged.
+    Rejected {
+        /// NIS of the innovation.
+        nis: f64,
+    },
+}
+
+/// Why the filter refused an input.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum FilterError {
+    /// Non-finite input.
+    NotFinite,
+    /// Time step not in (0, `max_dt_s`].
+    BadTimeStep,
+    /// Innovation covariance not positive definite (bad measurement covariance).
+    Singular,
+}
+
+impl fmt::Display for FilterError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Self::NotFinite => "non-finite input",
+            Self::BadTimeStep => "time step out of range",
+            Self::Singular => "innovation covariance not positive definite",
+        })
+    }
+}
+impl core::error::Error for FilterError {}
+
+/// The error-state Kalman filter.
+#[derive(Debug, Clone)]
+pub struct NavFilter {
+    p: Vector3<f64>,
+    v: Vector3<f64>,
+    q: UnitQuaternion<f64>,
+    ba: Vector3<f64>,
+    bg: Vector3<f64>,
+    cov: Mat15,
+    cfg: FilterConfig,
+}
+
+fn skew(a: &Vector3<f64>) -> Matrix3<f64> {
+    Matrix3::new(0.0, -a.z, a.y, a.z, 0.0, -a.x, -a.y, a.x, 0.0)
+}
+
+/// Element `(i, j)` (0 outside the matrix, which the fixed sizes rule out).
+fn at<const R: usize, const C: usize>(m: &SMatrix<f64, R, C>, i: usize, j: usize) -> f64 {
+    m.get((i, j)).copied().unwrap_or(0.0)
+}
+
+fn wrap_pi(a: f64) -> f64 {
+    libm::remainder(a, core::f64::consts::TAU)
+}
+
+fn finite3(a: &[f64; 3]) -> bool {
+    a.iter().all(|v| v.is_finite())
+}
+
+impl NavFilter {
+    /// Filter at the initial estimate.
+    pub fn new(init: &InitialState, cfg: FilterConfig) -> Self {
+        let sig = [
+            init.position_sigma_m,
+            init.velocity_sigma_mps,
+            init.attitude_sigma_rad,
+            init.accel_bias_sigma,
+            init.gyro_bias_sigma,
+        ];
+        let cov = Mat15::from_fn(|i, j| {
+            let s = sig.get(i / 3).copied().unwrap_or(0.0);
+            if i == j { s * s } else { 0.0 }
+        });
+        Self {
+            p: Vector3::from(init.position_m),
+            v: Vector3::from(init.velocity_mps),
+            q: UnitQuaternion::from_euler_angles(0.0, 0.0, init.yaw_rad),
+            ba: Vector3::zeros(),
+            bg: Vector3::zeros(),
+            cov,
+            cfg,
+        }
+    }
+
+    /// Position estimate, m (ENU).
+    pub fn position_m(&self) -> [f64; 3] {
+        self.p.into()
+    }
+    /// Velocity estimate, m/s (ENU).
+    pub fn velocity_mps(&self) -> [f64; 3] {
+        self.v.into()
+    }
+    /// Yaw estimate ψ, rad in (−π, π].
+    pub fn yaw_rad(&self) -> f64 {
+        self.q.euler_angles().2
+    }
+    /// Accelerometer bias estimate, m/s².
+    pub fn accel_bias(&self) -> [f64; 3] {
+        self.ba.into()
+    }
+    /// Gyro bias estimate, rad/s.
+    pub fn gyro_bias(&self) -> [f64; 3] {
+        self.bg.into()
+    }
+    /// Horizontal position covariance, m² (east/north).
+    pub fn horizontal_cov_m2(&self) -> [[f64; 2]; 2] {
+        let c = &self.cov;
+        [[at(c, 0, 0), at(c, 0, 1)], [at(c, 1, 0), at(c, 1, 1)]]
+    }
+    /// Full 3-D position covariance, m².
+    pub fn position_cov_m2(&self) -> [[f64; 3]; 3] {
+        let mut c = [[0.0; 3]; 3];
+        for (i, row) in c.iter_mut().enumerate() {
+            for (j, v) in row.iter_mut().enumerate() {
+                *v = at(&self.cov, i, j);
+            }
+        }
+        c
+    }
+    /// 1σ yaw, rad.
+    pub fn yaw_sigma_rad(&self) -> f64 {
+        libm::sqrt(at(&self.cov, 8, 8).max(0.0))
+    }
+
+    /// Propagate by `dt_s` with the IMU's specific force (m/s², body) and angular rate
+    /// (rad/s, body), both raw (biases are removed here).
+    pub fn propagate(
+        &mut self,
+        dt_s: f64,
+        accel_mps2: [f64; 3],
+        gyro_radps: [f64; 3],
+    ) -> Result<(), FilterError> {
+        if !(dt_s.is_finite() && finite3(&accel_mps2) && finite3(&gyro_radps)) {
+            return Err(FilterError::NotFinite);
+        }
+        if !(dt_s > 0.0 && dt_s <= self.cfg.max_dt_s) {
+            return Err(FilterError::BadTimeStep);
+        }
+        let f_b = Vector3::from(accel_mps2) - self.ba;
+        let w_b = Vector3::from(gyro_radps) - self.bg;
+        let r = self.q.to_rotation_matrix().into_inner();
+        let f_n = r * f_b;
+        let a_n = f_n + Vector3::new(0.0, 0.0, -self.cfg.gravity_mps2);
+        self.p += self.v * dt_s + a_n * (0.5 * dt_s * dt_s);
+        self.v += a_n * dt_s;
+        self.q *= UnitQuaternion::from_scaled_axis(w_b * dt_s);
+        // Error dynamics, first-order discretisation Φ = I + F·dt.
+        let mut phi = Mat15::identity();
+        let i3 = Matrix3::<f64>::identity();
+        phi.fixed_view_mut::<3, 3>(0, 3).copy_from(&(i3 * dt_s));
+        phi.fixed_view_mut::<3, 3>(3, 6)
+            .copy_from(&(-skew(&f_n) * dt_s));
+        phi.fixed_view_mut::<3, 3>(3, 9).copy_from(&(-r * dt_s));
+        phi.fixed_view_mut::<3, 3>(6, 12).copy_from(&(-r * dt_s));
+        let c = &self.cfg;
+        // Diagonal process noise per 3-block: none on δp, then δv, δθ, δb_a, δb_g.
+        let blocks = [
+            0.0,
+            c.accel_noise * c.accel_noise * dt_s,
+            c.gyro_noise * c.gyro_noise * dt_s,
+            c.accel_bias_walk * c.accel_bias_walk * dt_s,
+            c.gyro_bias_walk * c.gyro_bias_walk * dt_s,
+        ];
+        let qd = Mat15::from_fn(|i, j| {
+            if i == j {
+                blocks.get(i / 3).copied().unwrap_or(0.0)
+            } else {
+                0.0
+            }
+        });
+        self.cov = phi * self.cov * phi.transpose() + qd;
+        self.symmetrise();
+        Ok(())
+    }
+
+    fn symmetrise(&mut self) {
+        self.cov = (self.cov + self.cov.transpose()) * 0.5;
+    }
+
+    /// Generic gated update: innovation `y` (M), measurement matrix `h` (M × 15), noise `r`.
+    fn update<const M: usize>(
+        &mut self,
+        y: SVector<f64, M>,
+        h: SMatrix<f64, M, 15>,
+        r: SMatrix<f64, M, M>,
+        gate: f64,
+    ) -> Result<UpdateOutcome, FilterError> {
+        let s = h * self.cov * h.transpose() + r;
+        let chol = s.cholesky().ok_or(FilterError::Singular)?;
+        let nis = at(&(y.transpose() * chol.solve(&y)), 0, 0);
+        if !nis.is_finite() {
+            return Err(FilterError::NotFinite);
+        }
+        if nis > gate {
+            return Ok(UpdateOutcome::Rejected { nis });
+        }
+        // K = P Hᵀ S⁻¹, computed as (S⁻¹ H P)ᵀ since S and P are symmetric.
+        let k = chol.solve(&(h * self.cov)).transpose();
+        let dx = k * y;
+        let ikh = Mat15::identity() - k * h;
+        self.cov = ikh * self.cov * ikh.transpose() + k * r * k.transpose();
+        self.symmetrise();
+        self.p += dx.fixed_rows::<3>(0);
+        self.v += dx.fixed_rows::<3>(3);
+        let dth: Vector3<f64> = dx.fixed_rows::<3>(6).into();
+        self.q = UnitQuaternion::from_scaled_axis(dth) * self.q;
+        self.ba += dx.fixed_rows::<3>(9);
+        self.bg += dx.fixed_rows::<3>(12);
+        Ok(UpdateOutcome::Accepted { nis })
+    }
+
+    /// Update with a TRN fix (east, north, yaw). Gated at `fix_gate_chi2`.
+    pub fn update_fix(&mut self, z: &FixMeasurement) -> Result<UpdateOutcome, FilterError> {
+        let c = z.position_cov_m2;
+        let vals = [
+            z.x_m,
+            z.y_m,
+            z.yaw_rad,
+            c[0][0],
+            c[0][1],
+            c[1][0],
+            c[1][1],
+            z.yaw_sigma_rad,
+        ];
+        if !vals.iter().all(|v| v.is_finite()) {
+            return Err(FilterError::NotFinite);
+        }
+        let y = SVector::<f64, 3>::new(
+            z.x_m - self.p.x,
+            z.y_m - self.p.y,
+            wrap_pi(z.yaw_rad - self.yaw_rad()),
+        );
+        // x, y observe δp_x, δp_y; yaw responds to the nav-frame rotation error about +z (level
+        // flight).
+        let h = SMatrix::<f64, 3, 15>::from_fn(|i, j| match (i, j) {
+            (0, 0) | (1, 1) | (2, 8) => 1.0,
+            _ => 0.0,
+        });
+        let r = SMatrix::<f64, 3, 3>::new(
+            c[0][0],
+            0.5 * (c[0][1] + c[1][0]),
+            0.0,
+            0.5 * (c[0][1] + c[1][0]),
+            c[1][1],
+            0.0,
+            0.0,
+            0.0,
+            z.yaw_sigma_rad * z.yaw_sigma_rad,
+        );
+        self.update(y, h, r, self.cfg.fix_gate_chi2)
+    }
+
+    /// Update with an altitude measurement (m, ENU z) of 1σ `sigma_m`.
+    pub fn update_altitude(
+        &mut self,
+        z_m: f64,
+        sigma_m: f64,
+    ) -> Result<UpdateOutcome, FilterError> {
+        if !(z_m.is_finite() && sigma_m.is_finite() && sigma_m > 0.0) {
+            return Err(FilterError::NotFinite);
+        }
+        let y = SVector::<f64, 1>::new(z_m - self.p.z);
+        let h = SMatrix::<f64, 1, 15>::from_fn(|_, j| if j == 2 { 1.0 } else { 0.0 });
+        let r = SMatrix::<f64, 1, 1>::new(sigma_m * sigma_m);
+        self.update(y, h, r, self.cfg.altitude_gate_chi2)
+    }
+}
