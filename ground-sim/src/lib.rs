@@ -21,9 +21,13 @@
 //! [`render::MAX_PICTURE_SIDE`] px.
 
 pub mod analysis;
+pub mod frames;
 pub mod dem;
 pub mod matchplot;
+pub mod onboard;
+pub mod reference;
 pub mod register;
 pub mod render;
 pub mod terrain;
 pub mod tile;
+pub mod trn;

@@ -27,6 +27,12 @@ enum Commands {
     /// Register a frame image against a reference image with the onboard chain (SURF, matching,
     /// MSAC, pose) and report rotation, scale, affine and position.
     Register(cli::register::Args),
+    /// Build a reference folder (tile.bin, slope.tif) straight from a DEM.
+    Tile(cli::tile::Args),
+    /// One synthetic flyer frame against a reference tile, scored against the truth.
+    Trn(cli::trn::Args),
+    /// Monte-Carlo campaign of frames at random poses against a reference tile.
+    Eval(cli::eval::Args),
     /// Run everything available end to end into one folder (today: terrain and pictures).
     Demo(cli::demo::Args),
 }
@@ -39,6 +45,9 @@ fn main() -> ExitCode {
         Commands::Resample(a) => cli::resample::run(a),
         Commands::Demo(a) => cli::demo::run(a),
         Commands::Register(a) => cli::register::run(a),
+        Commands::Tile(a) => cli::tile::run(a),
+        Commands::Trn(a) => cli::trn::run(a),
+        Commands::Eval(a) => cli::eval::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -14,21 +14,13 @@ use anyhow::{Context, Result, anyhow, bail};
 use nav_core::frame::{DemPatch, SLOPE_NODATA, SlopePx, slope_from_deg};
 use nav_core::msac::Model;
 use nav_core::slope::slope_into;
-use nav_core::{NavConfig, NavWorkspace, Navigator, SlopeImage, SurfConfig, Tile};
+use nav_core::{NavConfig, Navigator, SlopeImage, SurfConfig, Tile};
 use serde::Serialize;
 
 use crate::dem::read_geotiff;
 use crate::tile::{GeoGrid, MAX_TILE_FEATURES, build_tile};
 
-/// Largest frame side `register` accepts, pixels (the flight workspace is sized for it).
-pub const MAX_FRAME_SIDE: usize = 512;
-/// Frame keypoint budget.
-pub const FRAME_KEYPOINTS: usize = 256;
-/// Match list capacity.
-pub const MAX_MATCHES: usize = 256;
-
-type Workspace =
-    NavWorkspace<{ MAX_FRAME_SIDE * MAX_FRAME_SIDE }, MAX_FRAME_SIDE, FRAME_KEYPOINTS, MAX_MATCHES>;
+use crate::onboard::{FrameInput, MAX_FRAME_SIDE, new_workspace, run_frame, with_big_stack};
 
 /// What the raster values are.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -286,52 +278,19 @@ pub fn register(
     cfg.msac.model = opts.model;
     cfg.msac.seed = opts.seed;
     let nav = Navigator::new(tile, cfg);
-    // The workspace is a few MiB of fixed arrays: give it a thread with room for them.
-    let run = || -> Result<_> {
-        let mut ws = Box::new(Workspace::new());
-        let t1 = Instant::now();
-        let report = match kind {
-            RasterKind::Dem => {
-                let patch = DemPatch::new_checked(
-                    &frame.values,
-                    frame.width,
-                    frame.height,
-                    frame.pixel_m as f32,
-                )
-                .map_err(|e| anyhow!("frame: {e}"))?;
-                nav.locate_dem(&mut ws, &patch, None)
-            }
-            RasterKind::Slope => {
-                let px = slope_pixels(frame, kind)?;
-                let img =
-                    SlopeImage::new_checked(&px, frame.width, frame.height, frame.pixel_m as f32)
-                        .map_err(|e| anyhow!("frame: {e}"))?;
-                nav.locate_slope(&mut ws, &img, None)
-            }
-        }
-        .map_err(|e| anyhow!("frame: {e}"))?;
-        let time_ms = t1.elapsed().as_secs_f64() * 1e3;
-        let feats = ws.features().as_slice();
-        let pairs = ws
-            .matches()
-            .iter()
-            .zip(ws.inliers())
-            .filter_map(|(m, &inl)| {
-                let f = feats.get(m.frame as usize)?.keypoint;
-                let t = nav.tile().keypoint(m.tile as usize);
-                Some((f.x_px, f.y_px, t.x_px, t.y_px, inl))
-            })
-            .collect::<Vec<_>>();
-        Ok((report, pairs, time_ms))
+    let frame_px = match kind {
+        RasterKind::Dem => None,
+        RasterKind::Slope => Some(slope_pixels(frame, kind)?),
     };
-    let (report, pairs, time_ms) = std::thread::scope(|scope| {
-        std::thread::Builder::new()
-            .stack_size(64 << 20)
-            .spawn_scoped(scope, run)
-            .context("starting the registration thread")?
-            .join()
-            .map_err(|_| anyhow!("the registration thread panicked"))?
+    let run = with_big_stack(|| {
+        let mut ws = new_workspace();
+        let input = match &frame_px {
+            None => FrameInput::Dem(&frame.values, frame.width, frame.height, frame.pixel_m),
+            Some(px) => FrameInput::Slope(px, frame.width, frame.height, frame.pixel_m),
+        };
+        run_frame(&nav, &mut ws, input, None).map_err(|e| anyhow!("frame: {e}"))
     })?;
+    let (report, pairs, time_ms) = (run.report, run.pairs, run.time_ms);
     let mut out = RegisterReport {
         fix: report.outcome.is_ok(),
         no_fix_reason: report.outcome.err().map(|e| e.to_string()),

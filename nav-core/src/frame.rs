@@ -291,6 +291,25 @@ impl<const MAX_PX: usize> SlopeBuffer<MAX_PX> {
         Ok(img)
     }
 
+    /// [`Self::compute_from`] with isolated dropouts filled (see
+    /// [`crate::slope::slope_into_with`]).
+    pub fn compute_from_filled(&mut self, dem: &DemPatch<'_>) -> Result<SlopeImage<'_>, FrameError> {
+        let img = crate::slope::slope_into_with(dem, &mut self.px, true)?;
+        self.width = img.width();
+        self.height = img.height();
+        self.pixel_m = img.pixel_m();
+        Ok(img)
+    }
+
+    /// Slope of `dem` binned `k × k` (see [`crate::slope::slope_into_binned`]).
+    pub fn compute_binned(&mut self, dem: &DemPatch<'_>, k: usize, fill: bool) -> Result<SlopeImage<'_>, FrameError> {
+        let img = crate::slope::slope_into_binned(dem, k, &mut self.px, fill)?;
+        self.width = img.width();
+        self.height = img.height();
+        self.pixel_m = img.pixel_m();
+        Ok(img)
+    }
+
     /// The last computed image.
     pub fn image(&self) -> Result<SlopeImage<'_>, FrameError> {
         let n = self.width * self.height;

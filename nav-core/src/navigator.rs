@@ -54,6 +54,14 @@ pub struct NavConfig {
     pub guided_radius_px: f32,
     /// SSD limit for guided matches.
     pub guided_max_ssd: f32,
+    /// Fill isolated height dropouts before computing slope (see
+    /// [`crate::slope::slope_into_with`]).
+    pub fill_dropouts: bool,
+    /// Bin DEM frames finer than the tile to about the tile's ground sample distance
+    /// (`k = round(tile pixel / frame pixel)` when that is ≥ 2) before slope and SURF: both
+    /// slopes then see the same scale of terrain, keypoints land more consistently, and the
+    /// frame has k² times fewer pixels to process. Keypoints and the fix stay in frame pixels.
+    pub bin_to_tile: bool,
 }
 
 impl Default for NavConfig {
@@ -66,6 +74,8 @@ impl Default for NavConfig {
             auto_min_scale: true,
             guided_radius_px: 3.0,
             guided_max_ssd: 1.0,
+            fill_dropouts: true,
+            bin_to_tile: true,
         }
     }
 }
@@ -120,6 +130,8 @@ pub struct FrameReport {
     pub affine: Option<Affine>,
     /// Matching counters.
     pub match_stats: MatchStats,
+    /// Detector counters for the frame.
+    pub detect_stats: crate::detector::DetectStats,
 }
 
 /// Caller-owned working memory for one frame: slope buffer, SURF scratch, up to `MAX_KP` frame
@@ -205,16 +217,29 @@ impl<'t> Navigator<'t> {
         &self.cfg
     }
 
+    /// Binning factor for a DEM frame of `frame_pixel_m` metres per pixel (1 = none).
+    pub fn bin_factor(&self, frame_pixel_m: f32) -> usize {
+        if !self.cfg.bin_to_tile || !(frame_pixel_m > 0.0) {
+            return 1;
+        }
+        let k = libm::roundf(self.tile.header().pixel_m() as f32 / frame_pixel_m);
+        if k >= 2.0 { (k as usize).min(crate::slope::MAX_BIN) } else { 1 }
+    }
+
     /// SURF settings for a frame of `frame_pixel_m` metres per pixel: the tile's, with the
     /// minimum scale raised for frames finer than the tile.
     pub fn frame_surf_config(&self, frame_pixel_m: f32) -> SurfConfig {
         let mut cfg = self.tile.header().surf_config();
         let ratio = self.tile.header().pixel_m() as f32 / frame_pixel_m;
-        cfg.detector.min_scale_px = if self.cfg.auto_min_scale && ratio > 1.0 {
-            cfg.detector.min_scale_px.max(SMALLEST_SCALE_PX) * ratio
+        if self.cfg.auto_min_scale && ratio > 1.25 {
+            cfg.detector.min_scale_px = cfg.detector.min_scale_px.max(SMALLEST_SCALE_PX) * ratio;
+            // The tile's largest scales appear `ratio` times larger in the frame: one more
+            // octave per doubling keeps them detectable.
+            let extra = libm::roundf(libm::log2f(ratio)).clamp(0.0, 2.0) as u8;
+            cfg.detector.octaves = (cfg.detector.octaves + extra).min(crate::detector::MAX_OCTAVES as u8);
         } else {
-            0.0
-        };
+            cfg.detector.min_scale_px = 0.0;
+        }
         cfg
     }
 
@@ -231,11 +256,18 @@ impl<'t> Navigator<'t> {
             features,
             ..
         } = ws;
-        let img = slope.compute_from(dem)?;
+        let k = self.bin_factor(dem.pixel_m());
+        let img = if k > 1 {
+            slope.compute_binned(dem, k, self.cfg.fill_dropouts)?
+        } else if self.cfg.fill_dropouts {
+            slope.compute_from_filled(dem)?
+        } else {
+            slope.compute_from(dem)?
+        };
         let cfg = self.frame_surf_config(img.pixel_m());
         extract(&img, &cfg, surf.scratch(), features)?;
-        let (w, h) = (img.width(), img.height());
-        Ok(self.locate_features(ws, w, h, prior))
+        features.unbin(k);
+        Ok(self.locate_features(ws, dem.width(), dem.height(), prior))
     }
 
     /// Locate a slope image.
@@ -337,6 +369,7 @@ impl<'t> Navigator<'t> {
             msac_iterations: 0,
             affine: None,
             match_stats: MatchStats::default(),
+            detect_stats: ws.features.stats,
         };
         ws.matches.clear();
         if feats.len() < self.cfg.gate.min_matches as usize {

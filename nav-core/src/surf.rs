@@ -108,6 +108,17 @@ impl<const N: usize> Features<N> {
     pub const fn footprint_bytes() -> usize {
         core::mem::size_of::<Self>()
     }
+    /// Express keypoints found on a `k × k`-binned image in the unbinned image's pixels: a binned
+    /// pixel `c` covers pixels `k·c … k·c + k − 1`, so its centre is at `k·c + (k − 1)/2`.
+    pub fn unbin(&mut self, k: usize) {
+        let kf = k as f32;
+        let off = (kf - 1.0) * 0.5;
+        for f in self.features.iter_mut() {
+            f.keypoint.x_px = f.keypoint.x_px * kf + off;
+            f.keypoint.y_px = f.keypoint.y_px * kf + off;
+            f.keypoint.scale_px *= kf;
+        }
+    }
 }
 
 /// Wrapper giving keypoints the total order used for selection.

@@ -3,10 +3,13 @@
 //! `Commands` in `main.rs`.
 
 pub mod demo;
+pub mod eval;
 pub mod info;
 pub mod register;
 pub mod resample;
 pub mod terrain;
+pub mod tile;
+pub mod trn;
 
 use std::path::Path;
 use std::time::Duration;

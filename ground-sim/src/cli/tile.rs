@@ -1,0 +1,47 @@
+//! `ground-sim tile`: a reference folder (tile.bin, slope.tif, reference-dem.tif, tile.json)
+//! straight from a DEM, without the radar: the "perfect InSAR" reference, for closed-loop runs
+//! before (or beside) the InSAR chain.
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+use ground_sim::dem::read_geotiff;
+use ground_sim::reference::{reference_dem, write_reference};
+use ground_sim::tile::MAX_TILE_FEATURES;
+use nav_core::{DetectorConfig, SurfConfig};
+
+/// Arguments of `ground-sim tile`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// Source DEM (GeoTIFF, north-up).
+    #[arg(long)]
+    pub dem: PathBuf,
+    /// Reference pixel size, metres (the paper: 20).
+    #[arg(long, default_value_t = 20.0)]
+    pub pixel_m: f64,
+    /// Output folder.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Detector threshold, (degrees of slope)².
+    #[arg(long, default_value_t = DetectorConfig::default().threshold)]
+    pub threshold: f32,
+    /// Most features kept (strongest first).
+    #[arg(long, default_value_t = MAX_TILE_FEATURES)]
+    pub max_features: usize,
+    /// Also write the summary JSON here.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+}
+
+/// Run `ground-sim tile`.
+pub fn run(a: &Args) -> anyhow::Result<()> {
+    let dem = read_geotiff(&a.dem).with_context(|| format!("reading {}", a.dem.display()))?;
+    let r = reference_dem(&dem, a.pixel_m)?;
+    let cfg = SurfConfig { detector: DetectorConfig { threshold: a.threshold, ..Default::default() }, upright: false };
+    let s = write_reference(&r, &a.out, &cfg, a.max_features.min(MAX_TILE_FEATURES))?;
+    println!("reference  {}x{} px at {} m: {} features, {} bytes -> {}", s.width_px, s.height_px, s.pixel_m, s.features, s.tile_bytes, a.out.display());
+    if let Some(j) = &a.json {
+        super::write_json(j, &s)?;
+    }
+    Ok(())
+}

@@ -1,0 +1,105 @@
+//! `ground-sim trn`: one synthetic frame from the truth DEM against a reference tile, scored.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, anyhow};
+use ground_sim::dem::read_geotiff;
+use ground_sim::frames::{FramePose, SensorModel, synth_frame};
+use ground_sim::matchplot::match_picture;
+use ground_sim::onboard::{FrameInput, new_workspace, run_frame, with_big_stack};
+use ground_sim::reference::load;
+use ground_sim::trn::score;
+use nav_core::{NavConfig, Navigator, Tile};
+
+/// Arguments of `ground-sim trn`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// Reference folder (tile.bin, slope.tif) from `ground-sim tile` or `ground-sim insar`.
+    #[arg(long)]
+    pub tile: PathBuf,
+    /// Truth DEM the flyer's frame is synthesised from (GeoTIFF).
+    #[arg(long)]
+    pub dem: PathBuf,
+    /// Frame heading: its +x axis, clockwise from east, degrees.
+    #[arg(long, default_value_t = 0.0)]
+    pub heading_deg: f64,
+    /// Frame centre east, metres (default: the tile centre).
+    #[arg(long)]
+    pub x_m: Option<f64>,
+    /// Frame centre north, metres (default: the tile centre).
+    #[arg(long)]
+    pub y_m: Option<f64>,
+    /// Frame pixel size, metres (the paper: 10).
+    #[arg(long, default_value_t = 10.0)]
+    pub pixel_m: f64,
+    /// Frame side, pixels.
+    #[arg(long, default_value_t = 200)]
+    pub size_px: usize,
+    /// Range noise 1σ, metres.
+    #[arg(long, default_value_t = SensorModel::default().range_noise_m)]
+    pub noise_m: f64,
+    /// Fraction of dropped pixels.
+    #[arg(long, default_value_t = SensorModel::default().dropout_frac)]
+    pub dropout: f64,
+    /// Noise seed.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Picture of the matches (frame left, reference right), like the paper's Fig. 7.
+    #[arg(long)]
+    pub png: Option<PathBuf>,
+    /// JSON report.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+}
+
+/// Run `ground-sim trn`.
+pub fn run(a: &Args) -> anyhow::Result<()> {
+    let reference = load(&a.tile)?;
+    let tile = Tile::parse(&reference.tile_bytes).map_err(|e| anyhow!("{e}"))?;
+    let dem = read_geotiff(&a.dem).with_context(|| format!("reading {}", a.dem.display()))?;
+    let h = tile.header();
+    let (cx, cy) = h.pixel_to_geo((h.width_px as f64 - 1.0) / 2.0, (h.height_px as f64 - 1.0) / 2.0);
+    let pose = FramePose { x_m: a.x_m.unwrap_or(cx), y_m: a.y_m.unwrap_or(cy), heading_rad: a.heading_deg.to_radians(), pixel_m: a.pixel_m };
+    let sensor = SensorModel { width_px: a.size_px, height_px: a.size_px, range_noise_m: a.noise_m, dropout_frac: a.dropout, ..SensorModel::default() };
+    let frame = synth_frame(&dem, &pose, &sensor, a.seed)?;
+    let nav = Navigator::new(tile, NavConfig::default());
+    let run = with_big_stack(|| {
+        let mut ws = new_workspace();
+        run_frame(&nav, &mut ws, FrameInput::Dem(&frame.heights_m, frame.width, frame.height, a.pixel_m), None).map_err(|e| anyhow!("{e}"))
+    })?;
+    let s = score(&tile, &run, &pose, frame.width, frame.height);
+    println!("frame      {}x{} px at {} m, heading {:.1}°, centre ({:.1}, {:.1}) m", frame.width, frame.height, a.pixel_m, a.heading_deg, pose.x_m, pose.y_m);
+    println!("features   {} frame, {} tile; matches {}, inliers {}", s.features, nav.tile().len(), s.matches, s.inliers);
+    let d = run.report.detect_stats;
+    println!(
+        "detector   {} maxima: {} on no data, {} refused by refinement, {} below the tile's scale",
+        d.maxima, d.rejected_nodata, d.rejected_refine, d.rejected_scale
+    );
+    match (s.rotation_deg, s.heading_err_deg, s.scale, s.pos_err_m) {
+        (Some(r), Some(he), Some(sc), Some(pe)) => {
+            println!("rotation   {r:.3}° (error {he:+.3}°), scale {sc:.4} (truth {:.4})", s.scale_truth);
+            println!(
+                "position   error {pe:.2} m = {:.3} ref px; registration error mean {:.3} / max {:.3} ref px{}",
+                s.center_err_px.unwrap_or(f64::NAN),
+                s.pos_err_mean_px.unwrap_or(f64::NAN),
+                s.pos_err_max_px.unwrap_or(f64::NAN),
+                if s.false_fix { "  FALSE FIX" } else { "" }
+            );
+        }
+        _ => println!("no fix     {}", s.no_fix_reason.as_deref().unwrap_or("?")),
+    }
+    println!("time       {:.2} ms", s.time_ms);
+    if let Some(j) = &a.json {
+        super::write_json(j, &s)?;
+        println!("json       {}", j.display());
+    }
+    if let Some(p) = &a.png {
+        let fs = ground_sim::frames::frame_slope_deg(&frame);
+        let ref_slope = reference.slope.as_ref().ok_or_else(|| anyhow!("{} has no slope.tif for the picture", a.tile.display()))?;
+        let img = match_picture((&fs, frame.width, frame.height), (ref_slope.heights_m(), ref_slope.width(), ref_slope.height()), &run.pairs);
+        super::ensure_parent(p)?;
+        img.save(p).with_context(|| format!("writing {}", p.display()))?;
+        println!("picture    {}", p.display());
+    }
+    Ok(())
+}

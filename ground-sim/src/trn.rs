@@ -1,0 +1,111 @@
+//! One TRN frame scored against the truth: where the frame really was versus what the onboard
+//! chain said.
+
+use nav_core::{Fix, Tile, TileHeader};
+use serde::Serialize;
+
+use crate::frames::FramePose;
+use crate::onboard::FrameRun;
+
+/// Truth map from frame pixels to tile pixels for a frame taken at `pose`.
+pub fn truth_to_tile(h: &TileHeader<'_>, pose: &FramePose, w: usize, hgt: usize, x: f64, y: f64) -> (f64, f64) {
+    let (gx, gy) = pose.frame_to_geo(x, y, w, hgt);
+    ((gx - h.origin_x_m) / h.pixel_x_m, (gy - h.origin_y_m) / h.pixel_y_m)
+}
+
+/// Scores of one frame (the JSON of `ground-sim trn`, one row of `eval`).
+#[derive(Debug, Clone, Serialize, Default)]
+pub struct TrnScore {
+    /// Whether the gate gave a fix.
+    pub fix: bool,
+    /// Why not.
+    pub no_fix_reason: Option<String>,
+    /// A fix more than 3 reference pixels from the truth.
+    pub false_fix: bool,
+    /// Frame features.
+    pub features: u16,
+    /// Putative matches.
+    pub matches: u16,
+    /// Inliers.
+    pub inliers: u16,
+    /// Estimated rotation, degrees.
+    pub rotation_deg: Option<f64>,
+    /// Heading error, degrees (wrapped to ±180).
+    pub heading_err_deg: Option<f64>,
+    /// Estimated scale (tile px per frame px).
+    pub scale: Option<f64>,
+    /// True scale.
+    pub scale_truth: f64,
+    /// Mean registration error over the inliers, reference pixels (fix map vs truth map at each
+    /// inlier's frame position).
+    pub pos_err_mean_px: Option<f64>,
+    /// Max registration error over the inliers, reference pixels.
+    pub pos_err_max_px: Option<f64>,
+    /// Error of the frame centre, reference pixels.
+    pub center_err_px: Option<f64>,
+    /// Error of the frame centre, metres.
+    pub pos_err_m: Option<f64>,
+    /// Reported 1σ of the centre, metres.
+    pub center_sigma_m: Option<f64>,
+    /// Onboard time on this host, ms.
+    pub time_ms: f64,
+    /// Truth pose.
+    pub truth: Option<FramePose>,
+}
+
+/// Wrap degrees to (−180, 180].
+pub fn wrap_deg(d: f64) -> f64 {
+    let r = d.rem_euclid(360.0);
+    if r > 180.0 { r - 360.0 } else { r }
+}
+
+/// Score a frame run against its truth pose. `frame_w`, `frame_h` in pixels.
+pub fn score(tile: &Tile<'_>, run: &FrameRun, pose: &FramePose, frame_w: usize, frame_h: usize) -> TrnScore {
+    let h = tile.header();
+    let scale_truth = pose.pixel_m / h.pixel_m();
+    let mut s = TrnScore {
+        fix: run.report.outcome.is_ok(),
+        no_fix_reason: run.report.outcome.err().map(|e| e.to_string()),
+        features: run.report.features,
+        matches: run.report.matches,
+        inliers: run.report.inliers,
+        scale_truth,
+        time_ms: run.time_ms,
+        truth: Some(*pose),
+        ..Default::default()
+    };
+    if let Ok(f) = run.report.outcome {
+        fill_fix(&mut s, &f, h, pose, frame_w, frame_h, run);
+    }
+    s
+}
+
+fn fill_fix(s: &mut TrnScore, f: &Fix, h: &TileHeader<'_>, pose: &FramePose, w: usize, hh: usize, run: &FrameRun) {
+    let rot = f.similarity.rotation_rad.to_degrees();
+    // A north-up tile (pixel_y < 0) has pixel axes east/south, the frame heading's own axes.
+    let expect = if h.pixel_y_m < 0.0 { pose.heading_rad.to_degrees() } else { -pose.heading_rad.to_degrees() };
+    s.rotation_deg = Some(rot);
+    s.heading_err_deg = Some(wrap_deg(rot - expect));
+    s.scale = Some(f.similarity.scale);
+    let (cx, cy) = ((w as f64 - 1.0) / 2.0, (hh as f64 - 1.0) / 2.0);
+    let (tx, ty) = truth_to_tile(h, pose, w, hh, cx, cy);
+    let ce = (f.center_tile_px[0] - tx).hypot(f.center_tile_px[1] - ty);
+    s.center_err_px = Some(ce);
+    s.pos_err_m = Some(ce * h.pixel_m());
+    s.center_sigma_m = Some(f.center_cov_geo_m2[0][0].max(0.0).sqrt());
+    let errs: Vec<f64> = run
+        .pairs
+        .iter()
+        .filter(|p| p.4)
+        .map(|&(x, y, _, _, _)| {
+            let (ex, ey) = f.affine.apply(x as f64, y as f64);
+            let (tx, ty) = truth_to_tile(h, pose, w, hh, x as f64, y as f64);
+            (ex - tx).hypot(ey - ty)
+        })
+        .collect();
+    if !errs.is_empty() {
+        s.pos_err_mean_px = Some(errs.iter().sum::<f64>() / errs.len() as f64);
+        s.pos_err_max_px = Some(errs.iter().copied().fold(0.0, f64::max));
+    }
+    s.false_fix = ce > 3.0;
+}
