@@ -134,7 +134,10 @@ pub(crate) fn orientation(ii: &Integral<'_>, kp: &Keypoint, w: &Weights) -> f32 
 pub(crate) fn descriptor(ii: &Integral<'_>, kp: &Keypoint, w: &Weights) -> Descriptor {
     let s = kp.scale_px;
     let k = round_i(s).max(1);
-    let (si, co) = (libm::sinf(kp.orientation_rad), libm::cosf(kp.orientation_rad));
+    let (si, co) = (
+        libm::sinf(kp.orientation_rad),
+        libm::cosf(kp.orientation_rad),
+    );
     let mut d = [0.0f32; DESCRIPTOR_LEN];
     for j in 0..20usize {
         for i in 0..20usize {

@@ -208,7 +208,8 @@ pub(crate) fn detect(
     for octave in 0..cfg.octaves as usize {
         let step = sample_step(octave);
         let (gw, gh) = (w.div_ceil(step), h.div_ceil(step));
-        let idx = |layer: usize, gy: usize, gx: usize| (layer * RING_ROWS + gy % RING_ROWS) * gw + gx;
+        let idx =
+            |layer: usize, gy: usize, gx: usize| (layer * RING_ROWS + gy % RING_ROWS) * gw + gx;
         for gy in 0..gh {
             let y = gy * step;
             for layer in 0..layers {
@@ -231,7 +232,9 @@ pub(crate) fn detect(
                 continue;
             }
             let cy = gy - 1;
-            let at = |layer: usize, gy: usize, gx: usize| ring.get(idx(layer, gy, gx)).copied().unwrap_or(0.0);
+            let at = |layer: usize, gy: usize, gx: usize| {
+                ring.get(idx(layer, gy, gx)).copied().unwrap_or(0.0)
+            };
             for layer in 1..layers - 1 {
                 // The largest filter of the neighbourhood must fit one step beyond the centre.
                 let reach = (filter_side(octave, layer + 1) - 1) / 2 + step;
@@ -265,7 +268,13 @@ pub(crate) fn detect(
 }
 
 #[inline]
-fn strict_max(at: &impl Fn(usize, usize, usize) -> f32, layer: usize, cy: usize, gx: usize, v: f32) -> bool {
+fn strict_max(
+    at: &impl Fn(usize, usize, usize) -> f32,
+    layer: usize,
+    cy: usize,
+    gx: usize,
+    v: f32,
+) -> bool {
     for l in layer - 1..=layer + 1 {
         for yy in cy - 1..=cy + 1 {
             for xx in gx - 1..=gx + 1 {

@@ -87,7 +87,10 @@ impl fmt::Display for FrameError {
         match self {
             Self::Empty => write!(f, "frame has zero width or height"),
             Self::SizeMismatch { expected, got } => {
-                write!(f, "frame buffer holds {got} pixels, width x height needs {expected}")
+                write!(
+                    f,
+                    "frame buffer holds {got} pixels, width x height needs {expected}"
+                )
             }
             Self::TooLarge { needed, capacity } => {
                 write!(f, "frame needs {needed} but capacity is {capacity}")
@@ -308,7 +311,10 @@ mod tests {
         for i in 0..=9000 {
             let deg = i as f32 * 0.01;
             let back = slope_to_deg(slope_from_deg(deg)).unwrap_or(f32::NAN);
-            assert!((back - deg).abs() <= 0.5 * SLOPE_LSB_DEG + 1e-6, "{deg} -> {back}");
+            assert!(
+                (back - deg).abs() <= 0.5 * SLOPE_LSB_DEG + 1e-6,
+                "{deg} -> {back}"
+            );
         }
         assert!(!slope_is_valid(slope_from_deg(f32::NAN)));
         assert_eq!(slope_from_deg(-3.0).to_bits(), 0);
@@ -321,9 +327,15 @@ mod tests {
         assert!(DemPatch::new_checked(&h, 4, 3, 10.0).is_ok());
         assert_eq!(
             DemPatch::new_checked(&h, 5, 3, 10.0).err(),
-            Some(FrameError::SizeMismatch { expected: 15, got: 12 })
+            Some(FrameError::SizeMismatch {
+                expected: 15,
+                got: 12
+            })
         );
-        assert_eq!(DemPatch::new_checked(&h, 0, 3, 10.0).err(), Some(FrameError::Empty));
+        assert_eq!(
+            DemPatch::new_checked(&h, 0, 3, 10.0).err(),
+            Some(FrameError::Empty)
+        );
         for bad in [0.0, -1.0, f32::NAN, f32::INFINITY] {
             assert_eq!(
                 DemPatch::new_checked(&h, 4, 3, bad).err(),

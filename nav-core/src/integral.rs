@@ -30,9 +30,10 @@ impl<'a> Integral<'a> {
         let (w, h) = (img.width(), img.height());
         let n = w * h;
         let capacity = out.len();
-        let out = out
-            .get_mut(..n)
-            .ok_or(FrameError::TooLarge { needed: n, capacity })?;
+        let out = out.get_mut(..n).ok_or(FrameError::TooLarge {
+            needed: n,
+            capacity,
+        })?;
         let px = img.pixels();
         for row in 0..h {
             let mut run = 0u32;
@@ -153,7 +154,11 @@ mod tests {
                                 }
                             }
                         }
-                        assert_eq!(ii.box_sum(x, y, bw, bh) as u64, direct, "box {x},{y},{bw}x{bh}");
+                        assert_eq!(
+                            ii.box_sum(x, y, bw, bh) as u64,
+                            direct,
+                            "box {x},{y},{bw}x{bh}"
+                        );
                     }
                 }
             }

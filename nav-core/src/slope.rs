@@ -24,9 +24,10 @@ pub fn slope_into<'b>(
     let (w, h) = (dem.width(), dem.height());
     let n = w * h;
     let capacity = out.len();
-    let out = out
-        .get_mut(..n)
-        .ok_or(FrameError::TooLarge { needed: n, capacity })?;
+    let out = out.get_mut(..n).ok_or(FrameError::TooLarge {
+        needed: n,
+        capacity,
+    })?;
     let inv8 = 1.0 / (8.0 * dem.pixel_m());
     for row in 0..h {
         for col in 0..w {
@@ -99,7 +100,9 @@ mod tests {
         let mut z = plane(8, 8, 5.0, 0.1, 0.0);
         z[3 * 8 + 3] = f32::NAN;
         z[5 * 8 + 6] = -9999.0;
-        let dem = DemPatch::new_checked(&z, 8, 8, 5.0).unwrap().with_nodata(-9999.0);
+        let dem = DemPatch::new_checked(&z, 8, 8, 5.0)
+            .unwrap()
+            .with_nodata(-9999.0);
         let mut out = [SLOPE_NODATA; 64];
         let img = slope_into(&dem, &mut out).unwrap();
         for r in 1..7usize {
@@ -118,7 +121,10 @@ mod tests {
         let mut out = [SLOPE_NODATA; 10];
         assert!(matches!(
             slope_into(&dem, &mut out),
-            Err(FrameError::TooLarge { needed: 64, capacity: 10 })
+            Err(FrameError::TooLarge {
+                needed: 64,
+                capacity: 10
+            })
         ));
     }
 }

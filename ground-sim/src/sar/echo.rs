@@ -26,7 +26,7 @@ use rustfft::{Fft, FftPlanner};
 
 use super::config::{Derived, Polarisation, SarConfig};
 use super::geometry::{Antenna, EchoWindow, PulseGrid, fft_friendly_len};
-use super::kernel::{KERNEL_TAPS, SincKernel};
+use super::kernel::{KERNEL_TAPS, SincKernel, cos_sin_turns};
 use super::scattering::complex_gaussian;
 use super::scene::Scatterers;
 use super::{C32, C64, MAX_POLARISATIONS, SarError, SarResult};
@@ -226,10 +226,9 @@ impl EchoSimulator {
                             continue;
                         }
                         let base = first as usize;
-                        let cycles = r * two_over_lambda;
-                        let (s, c) =
-                            ((-2.0 * std::f64::consts::PI) * (cycles - cycles.floor())).sin_cos();
-                        let ph = C32::new(c as f32, s as f32);
+                        // exp(−i4πR/λ) = exp(−i2π·(2R/λ)).
+                        let (c, s) = cos_sin_turns(r * two_over_lambda);
+                        let ph = C32::new(c as f32, -s as f32);
                         for p in 0..npol {
                             let a = sc.amplitude[i][p] * ph;
                             let dst = &mut buf[p * nfft + base..p * nfft + base + KERNEL_TAPS];

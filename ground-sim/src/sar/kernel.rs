@@ -76,9 +76,14 @@ impl SincKernel {
 
     /// Weights for a value at fractional sample position `u`: `value(u) ≈ Σ_j w[j]·x[first + j]`.
     /// Returns `first` (may be negative or past the end: callers check bounds).
-    #[inline]
+    #[inline(always)]
     pub fn weights(&self, u: f64) -> (i64, [f32; KERNEL_TAPS]) {
-        let k0 = u.floor();
+        // Truncation is floor for u ≥ 0 (the hot path) and avoids a libm call on baseline x86.
+        let k0 = if u >= 0.0 {
+            (u as i64) as f64
+        } else {
+            u.floor()
+        };
         let pf = (u - k0) * KERNEL_PHASES as f64;
         let p = (pf as usize).min(KERNEL_PHASES - 1);
         let a = (pf - p as f64) as f32;
@@ -91,9 +96,53 @@ impl SincKernel {
     }
 }
 
+/// Nearest integer of `x` (ties to even) for `|x| < 2⁵¹`, without a libm call: adding and
+/// subtracting 1.5·2⁵² makes the FPU round in the default mode.
+#[inline(always)]
+fn round_fast(x: f64) -> f64 {
+    const MAGIC: f64 = 6_755_399_441_055_744.0;
+    (x + MAGIC) - MAGIC
+}
+
+/// `(cos 2πt, sin 2πt)` for a phase `t` in turns, `|t| < 2⁴⁹`. Quadrant reduction in f64 (exact)
+/// and Taylor polynomials on `[−π/4, π/4]` (error < 2·10⁻⁹); ≈ 10× cheaper than libm's `sincos`
+/// in the echo deposit loop. Tested against `f64::sin_cos`.
+#[inline(always)]
+pub fn cos_sin_turns(t: f64) -> (f64, f64) {
+    let x4 = 4.0 * t;
+    let q = round_fast(x4);
+    let r = (x4 - q) * std::f64::consts::FRAC_PI_2;
+    let r2 = r * r;
+    let s =
+        r * (1.0 + r2 * (-1.0 / 6.0 + r2 * (1.0 / 120.0 + r2 * (-1.0 / 5040.0 + r2 / 362_880.0))));
+    let c = 1.0
+        + r2 * (-0.5
+            + r2 * (1.0 / 24.0 + r2 * (-1.0 / 720.0 + r2 * (1.0 / 40_320.0 - r2 / 3_628_800.0))));
+    match (q as i64) & 3 {
+        0 => (c, s),
+        1 => (-s, c),
+        2 => (-c, -s),
+        _ => (s, -c),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn fast_cos_sin_matches_libm() {
+        let mut worst = 0.0f64;
+        for i in 0..200_000u64 {
+            // Phases like 2R/λ at lunar ranges plus small and negative ones.
+            let t = (i as f64) * 4.656_612_873e-1 + if i % 2 == 0 { 9.3e5 } else { -3.1 };
+            let (c, s) = cos_sin_turns(t);
+            let frac = t - t.floor();
+            let (s0, c0) = (2.0 * std::f64::consts::PI * frac).sin_cos();
+            worst = worst.max((c - c0).abs()).max((s - s0).abs());
+        }
+        assert!(worst < 1e-8, "{worst}");
+    }
 
     #[test]
     fn interpolates_a_band_limited_tone() {
