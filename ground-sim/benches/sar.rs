@@ -14,7 +14,6 @@ use std::hint::black_box;
 use std::time::Duration;
 
 use criterion::{Criterion, criterion_group};
-use ground_sim::sar::SarConfig;
 use ground_sim::sar::echo::EchoSimulator;
 use ground_sim::sar::geometry::{AcquisitionPlan, Antenna, Geometry, SarDem};
 use ground_sim::sar::pipeline::{SimOptions, simulate_with};
@@ -22,6 +21,7 @@ use ground_sim::sar::rda::RdaProcessor;
 use ground_sim::sar::scene::{
     AnalyticSurface, Scatterers, analytic_dem, build_facets, facet_scatterers,
 };
+use ground_sim::sar::{SarConfig, SarResult};
 use indicatif::ProgressBar;
 
 struct Small {
@@ -32,26 +32,34 @@ struct Small {
     zref: f64,
 }
 
-fn small_scene() -> Small {
-    let mut cfg = SarConfig::default();
-    cfg.noise_equivalent_sigma0_db = f64::NEG_INFINITY;
-    let d = cfg.derived().expect("config");
-    let dem: SarDem = analytic_dem(AnalyticSurface::Hill, 12, 5.0).expect("dem");
-    let g = Geometry::new(&dem, &cfg, &d).expect("geometry");
-    let plan = AcquisitionPlan::new(&dem, &cfg, &d, g).expect("plan");
-    let facets = build_facets(&dem, &plan.geometry).expect("facets");
+fn small_scene() -> SarResult<Small> {
+    let cfg = SarConfig {
+        noise_equivalent_sigma0_db: f64::NEG_INFINITY,
+        ..SarConfig::default()
+    };
+    let d = cfg.derived()?;
+    let dem: SarDem = analytic_dem(AnalyticSurface::Hill, 12, 5.0)?;
+    let g = Geometry::new(&dem, &cfg, &d)?;
+    let plan = AcquisitionPlan::new(&dem, &cfg, &d, g)?;
+    let facets = build_facets(&dem, &plan.geometry)?;
     let (scat, _) = facet_scatterers(&facets, &plan.geometry, &cfg, 1.0);
-    Small {
-        sim: EchoSimulator::new(&cfg, &d, plan.window, plan.pulses).expect("sim"),
-        rda: RdaProcessor::new(&cfg, &d, &plan).expect("rda"),
+    Ok(Small {
+        sim: EchoSimulator::new(&cfg, &d, plan.window, plan.pulses)?,
+        rda: RdaProcessor::new(&cfg, &d, &plan)?,
         scat,
         yz: plan.geometry.antenna_yz(Antenna::A1),
         zref: plan.geometry.reference_height_m,
-    }
+    })
 }
 
 fn bench_echo(c: &mut Criterion) {
-    let s = small_scene();
+    let s = match small_scene() {
+        Ok(s) => s,
+        Err(e) => {
+            eprintln!("small scene setup failed: {e}");
+            return;
+        }
+    };
     let hidden = ProgressBar::hidden();
     let mut g = c.benchmark_group("echo");
     g.bench_function("fast", |b| {
@@ -61,10 +69,13 @@ fn bench_echo(c: &mut Criterion) {
         b.iter(|| black_box(s.sim.simulate_time_domain(&s.scat, Antenna::A1, s.yz)))
     });
     g.finish();
-    let raw = s
-        .sim
-        .simulate_fast(&s.scat, Antenna::A1, s.yz, &hidden)
-        .expect("echo");
+    let raw = match s.sim.simulate_fast(&s.scat, Antenna::A1, s.yz, &hidden) {
+        Ok(r) => r,
+        Err(e) => {
+            eprintln!("echo failed: {e}");
+            return;
+        }
+    };
     c.bench_function("focus/rda", |b| {
         b.iter(|| black_box(s.rda.focus(&raw, s.yz, s.zref, &hidden)))
     });
@@ -72,7 +83,9 @@ fn bench_echo(c: &mut Criterion) {
 
 fn bench_pipeline(c: &mut Criterion) {
     let cfg = SarConfig::default();
-    let dem = analytic_dem(AnalyticSurface::Bowl, 201, 5.0).expect("dem");
+    let Ok(dem) = analytic_dem(AnalyticSurface::Bowl, 201, 5.0) else {
+        return;
+    };
     c.bench_function("pipeline/bowl_1km_both_antennas", |b| {
         b.iter(|| black_box(simulate_with(&dem, &cfg, &SimOptions::default())))
     });
@@ -83,8 +96,9 @@ fn full_scene_once() {
         return;
     }
     let cfg = SarConfig::default();
-    let dem = analytic_dem(AnalyticSurface::Bowl, 401, 10.0).expect("dem");
-    match simulate_with(&dem, &cfg, &SimOptions::default()) {
+    match analytic_dem(AnalyticSurface::Bowl, 401, 10.0)
+        .and_then(|dem| simulate_with(&dem, &cfg, &SimOptions::default()))
+    {
         Ok(p) => eprintln!(
             "full 4 km scene, 5 m mesh, both antennas, {} channel(s): scene {:.2} s, echoes {:.2} s, focusing {:.2} s, total {:.2} s, peak RSS {:?} MiB",
             cfg.polarisations.len(),

@@ -228,10 +228,10 @@ pub fn run_psf(args: PsfArgs) -> anyhow::Result<()> {
     let cfg = args.radar.resolve()?;
     let r = run_point_target(&cfg)?;
     let text = serde_json::to_string_pretty(&r)?;
-    if let Some(parent) = args.json.parent() {
-        if !parent.as_os_str().is_empty() {
-            std::fs::create_dir_all(parent)?;
-        }
+    if let Some(parent) = args.json.parent()
+        && !parent.as_os_str().is_empty()
+    {
+        std::fs::create_dir_all(parent)?;
     }
     std::fs::write(&args.json, text)?;
     println!(

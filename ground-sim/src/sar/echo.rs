@@ -176,6 +176,10 @@ impl EchoSimulator {
 
     /// Fast exact-equivalent echoes (see module docs). `antenna_yz` is the antenna track's
     /// `(y, z)`, m. Errors if a scatterer's kernel would fall outside the window.
+    #[allow(
+        clippy::needless_range_loop,
+        reason = "one index walks parallel SoA arrays"
+    )]
     pub fn simulate_fast(
         &self,
         sc: &Scatterers,
@@ -263,6 +267,10 @@ impl EchoSimulator {
 
     /// Direct evaluation of eq 11 (the oracle). Cost grows with the chirp length: keep scenes
     /// small.
+    #[allow(
+        clippy::needless_range_loop,
+        reason = "one index walks parallel SoA arrays"
+    )]
     pub fn simulate_time_domain(
         &self,
         sc: &Scatterers,

@@ -61,7 +61,7 @@ pub fn analyse_cut(cut: &[C32], spacing_m: f64, irw_theory_m: f64) -> SarResult<
     let h = n / 2;
     up[..h].copy_from_slice(&spec[..h]);
     up[m - (n - h)..].copy_from_slice(&spec[h..]);
-    if n % 2 == 0 {
+    if n.is_multiple_of(2) {
         let nyq = spec[h] * 0.5;
         up[h] = nyq;
         up[m - h] = nyq;
@@ -73,7 +73,7 @@ pub fn analyse_cut(cut: &[C32], spacing_m: f64, irw_theory_m: f64) -> SarResult<
         .enumerate()
         .max_by(|a, b| a.1.total_cmp(b.1))
         .ok_or_else(|| SarError::Shape("empty cut".into()))?;
-    if !(peak > 0.0) {
+    if peak.is_nan() || peak <= 0.0 {
         return Err(SarError::Shape("cut has no energy".into()));
     }
     let half = 0.5 * peak;

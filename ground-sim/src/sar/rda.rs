@@ -141,7 +141,7 @@ impl RdaProcessor {
             .map(|(h, pk)| h * C64::new(f64::from(pk.re), f64::from(pk.im)))
             .sum::<C64>()
             / nr;
-        if !(g_r.norm() > 0.0) {
+        if g_r.norm().is_nan() || g_r.norm() <= 0.0 {
             return Err(SarError::Config("chirp has no energy in band".into()));
         }
         let range_filter: Vec<C32> = reference

@@ -277,6 +277,10 @@ impl Scatterers {
 /// Facet scattering amplitudes `S = γ·sqrt(A/4π)` (eq 1) for the configured channels. Shadowed
 /// facets are dropped; `clutter_scale` multiplies every amplitude (1 for the physical scene,
 /// 0 for an isolated point target).
+#[allow(
+    clippy::needless_range_loop,
+    reason = "one index walks parallel SoA arrays"
+)]
 pub fn facet_scatterers(
     facets: &Facets,
     geom: &Geometry,

@@ -194,9 +194,11 @@ fn tilted_scene_sigma0_follows_ka_closed_form() {
 
 #[test]
 fn thermal_noise_floor_is_the_configured_nesz() {
-    let mut cfg = SarConfig::default();
-    cfg.noise_equivalent_sigma0_db = -20.0;
-    cfg.polarisations = vec![Polarisation::HH];
+    let cfg = SarConfig {
+        noise_equivalent_sigma0_db: -20.0,
+        polarisations: vec![Polarisation::HH],
+        ..SarConfig::default()
+    };
     let dem = analytic_dem(AnalyticSurface::Flat, 160, 5.0).unwrap();
     let pair = simulate_with(
         &dem,
