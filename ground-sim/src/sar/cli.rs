@@ -263,3 +263,56 @@ pub fn run_psf(args: PsfArgs) -> anyhow::Result<()> {
     );
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use tiff::encoder::{TiffEncoder, colortype::Gray32Float};
+    use tiff::tags::Tag;
+
+    fn write_dem(path: &Path, w: u32, h: u32, scale: Option<f64>) {
+        let data: Vec<f32> = (0..w * h).map(|i| i as f32 * 0.5 - 3.0).collect();
+        let file = std::fs::File::create(path).unwrap();
+        let mut enc = TiffEncoder::new(file).unwrap();
+        let mut img = enc.new_image::<Gray32Float>(w, h).unwrap();
+        if let Some(s) = scale {
+            img.encoder()
+                .write_tag(Tag::ModelPixelScaleTag, &[s, s, 0.0][..])
+                .unwrap();
+        }
+        img.write_data(&data).unwrap();
+    }
+
+    #[test]
+    fn reads_a_float_geotiff_with_pixel_scale() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("dem.tif");
+        write_dem(&p, 7, 5, Some(10.0));
+        let dem = read_geotiff_dem(&p, None).unwrap();
+        assert_eq!((dem.width, dem.height, dem.pixel_m), (7, 5, 10.0));
+        assert_eq!(dem.at(1, 2), 9.0 * 0.5 - 3.0);
+        let p2 = dir.path().join("noscale.tif");
+        write_dem(&p2, 4, 4, None);
+        assert!(read_geotiff_dem(&p2, None).is_err());
+        assert_eq!(read_geotiff_dem(&p2, Some(5.0)).unwrap().pixel_m, 5.0);
+    }
+
+    #[test]
+    fn flags_override_toml() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("sar.toml");
+        std::fs::write(&p, "altitude_m = 90000.0\nseed = 7\n").unwrap();
+        let args = RadarArgs {
+            config: Some(p),
+            seed: Some(9),
+            no_noise: true,
+            pol: vec![Polarisation::VV],
+            ..RadarArgs::default()
+        };
+        let cfg = args.resolve().unwrap();
+        assert_eq!(cfg.altitude_m, 90_000.0);
+        assert_eq!(cfg.seed, 9);
+        assert!(cfg.noise_sigma0_linear().is_none());
+        assert_eq!(cfg.polarisations, vec![Polarisation::VV]);
+    }
+}

@@ -5,7 +5,7 @@
 //! approximation (KA, eqs 5–7) describes quasi-specular scattering; at large θ the
 //! small-perturbation method (SPM, eqs 8–10). The paper uses KA "when ⟨|γ'_pq|²⟩ of KA is
 //! large at small incidence angles, otherwise SPM": here each channel uses KA below the angle
-//! where its KA and SPM mean powers cross ([`TwoScaleModel::switch_angle_rad`], ≈ 13.8° for the
+//! where its KA and SPM mean powers cross ([`TwoScaleModel::switch_angle_rad`], ≈ 12.3° for the
 //! default parameters) and SPM above it.
 //!
 //! `w` is complex Gaussian: `w = sqrt(⟨|w|²⟩)·g` with `g` a unit-power circular Gaussian drawn
