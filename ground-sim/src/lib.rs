@@ -12,6 +12,10 @@
 //! - [`analysis`]: slope through nav-core's flight code path, DEM statistics (the `info` JSON),
 //!   closed depressions and the main crater's depth/diameter.
 //! - [`render`]: PNG hillshade, elevation and slope pictures with labelled colour bars.
+//! - [`sar`]: dual-antenna SAR echoes over a DEM and Range-Doppler focusing (paper section II).
+//! - [`tile`], [`reference`]: reference tiles (SURF by nav-core) and reference folders.
+//! - [`frames`], [`onboard`], [`trn`], [`register`]: synthetic flyer frames, the flight code as
+//!   the ground runs it, and scoring against the truth.
 //!
 //! Conventions: pixel `(col, row)` has its centre at `(col, row)`; map frames are metres, x east,
 //! y north; geotransforms are GDAL's (pixel corners).
@@ -28,6 +32,7 @@ pub mod onboard;
 pub mod reference;
 pub mod register;
 pub mod render;
+pub mod sar;
 pub mod terrain;
 pub mod tile;
 pub mod trn;

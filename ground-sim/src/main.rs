@@ -7,8 +7,9 @@ mod cli;
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
+use ground_sim::sar::cli::{PsfArgs, SarArgs, run_psf, run_sar};
 
-/// Umbra ground segment: lunar terrain, GeoTIFF DEMs, pictures and statistics.
+/// Umbra ground segment: lunar terrain, SAR/InSAR simulation, reference tiles, TRN evaluation.
 #[derive(Debug, Parser)]
 #[command(name = "ground-sim", version, about)]
 struct Cli {
@@ -33,6 +34,10 @@ enum Commands {
     Trn(cli::trn::Args),
     /// Monte-Carlo campaign of frames at random poses against a reference tile.
     Eval(cli::eval::Args),
+    /// Simulate dual-antenna SAR echoes over a DEM and focus them into SLCs.
+    Sar(SarArgs),
+    /// Point-target analysis (IRW, PSLR, ISLR, peak location, interferometric phase).
+    Psf(PsfArgs),
     /// Run everything available end to end into one folder (today: terrain and pictures).
     Demo(cli::demo::Args),
 }
@@ -48,6 +53,8 @@ fn main() -> ExitCode {
         Commands::Tile(a) => cli::tile::run(a),
         Commands::Trn(a) => cli::trn::run(a),
         Commands::Eval(a) => cli::eval::run(a),
+        Commands::Sar(a) => run_sar(a.clone()),
+        Commands::Psf(a) => run_psf(a.clone()),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
