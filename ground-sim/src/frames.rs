@@ -87,7 +87,10 @@ pub fn height_at_geo(dem: &Dem, x: f64, y: f64) -> f32 {
     if !(col >= 0.0 && row >= 0.0 && col <= (w - 1) as f64 && row <= (h - 1) as f64) {
         return f32::NAN;
     }
-    let (c0, r0) = ((col as usize).min(w.saturating_sub(2)), (row as usize).min(h.saturating_sub(2)));
+    let (c0, r0) = (
+        (col as usize).min(w.saturating_sub(2)),
+        (row as usize).min(h.saturating_sub(2)),
+    );
     let (fx, fy) = ((col - c0 as f64) as f32, (row - r0 as f64) as f32);
     let z = |c, r| dem.get(c, r).unwrap_or(f32::NAN);
     let top = z(c0, r0) * (1.0 - fx) + z(c0 + 1, r0) * fx;
@@ -97,12 +100,22 @@ pub fn height_at_geo(dem: &Dem, x: f64, y: f64) -> f32 {
 
 /// Synthesise the frame at `pose` from `dem`, with noise drawn from a PRNG seeded by `seed`.
 /// Errors if the DEM is not north-up or the frame leaves it.
-pub fn synth_frame(dem: &Dem, pose: &FramePose, sensor: &SensorModel, seed: u64) -> Result<Frame, DemError> {
+pub fn synth_frame(
+    dem: &Dem,
+    pose: &FramePose,
+    sensor: &SensorModel,
+    seed: u64,
+) -> Result<Frame, DemError> {
     if !dem.geo.transform.is_north_up() {
-        return Err(DemError::Unsupported("frame synthesis needs a north-up DEM".into()));
+        return Err(DemError::Unsupported(
+            "frame synthesis needs a north-up DEM".into(),
+        ));
     }
     if !(pose.pixel_m.is_finite() && pose.pixel_m > 0.0) {
-        return Err(DemError::Invalid(format!("frame pixel size {} m", pose.pixel_m)));
+        return Err(DemError::Invalid(format!(
+            "frame pixel size {} m",
+            pose.pixel_m
+        )));
     }
     let (w, h, k) = (sensor.width_px, sensor.height_px, sensor.subsamples.max(1));
     let mut rng = rand_pcg::Pcg64::seed_from_u64(seed);
@@ -117,7 +130,10 @@ pub fn synth_frame(dem: &Dem, pose: &FramePose, sensor: &SensorModel, seed: u64)
             let mut acc = 0.0f64;
             for j in 0..k {
                 for i in 0..k {
-                    let (di, dj) = ((i as f64 + 0.5) / k as f64 - 0.5, (j as f64 + 0.5) / k as f64 - 0.5);
+                    let (di, dj) = (
+                        (i as f64 + 0.5) / k as f64 - 0.5,
+                        (j as f64 + 0.5) / k as f64 - 0.5,
+                    );
                     let (x, y) = pose.frame_to_geo(col as f64 + di, row as f64 + dj, w, h);
                     acc += height_at_geo(dem, x, y) as f64;
                 }
@@ -133,10 +149,19 @@ pub fn synth_frame(dem: &Dem, pose: &FramePose, sensor: &SensorModel, seed: u64)
             }
             let noise = sensor.range_noise_m * normal(&mut rng);
             let lost = rng.random::<f64>() < sensor.dropout_frac;
-            z[row * w + col] = if lost { f32::NAN } else { (acc / (k * k) as f64 + noise) as f32 };
+            z[row * w + col] = if lost {
+                f32::NAN
+            } else {
+                (acc / (k * k) as f64 + noise) as f32
+            };
         }
     }
-    Ok(Frame { width: w, height: h, heights_m: z, pose: *pose })
+    Ok(Frame {
+        width: w,
+        height: h,
+        heights_m: z,
+        pose: *pose,
+    })
 }
 
 /// Geo extent of a DEM's pixel centres: `(x_min, x_max, y_min, y_max)`, metres.
@@ -156,8 +181,15 @@ pub fn frame_reach_m(sensor: &SensorModel, pixel_m: f64) -> f64 {
 pub fn frame_slope_deg(frame: &Frame) -> Vec<f32> {
     use nav_core::frame::{DemPatch, SLOPE_NODATA, slope_to_deg};
     let mut px = vec![SLOPE_NODATA; frame.width * frame.height];
-    if let Ok(patch) = DemPatch::new_checked(&frame.heights_m, frame.width, frame.height, frame.pose.pixel_m as f32) {
+    if let Ok(patch) = DemPatch::new_checked(
+        &frame.heights_m,
+        frame.width,
+        frame.height,
+        frame.pose.pixel_m as f32,
+    ) {
         let _ = nav_core::slope::slope_into(&patch, &mut px);
     }
-    px.iter().map(|&p| slope_to_deg(p).unwrap_or(f32::NAN)).collect()
+    px.iter()
+        .map(|&p| slope_to_deg(p).unwrap_or(f32::NAN))
+        .collect()
 }

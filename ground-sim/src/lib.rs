@@ -25,8 +25,8 @@
 //! [`render::MAX_PICTURE_SIDE`] px.
 
 pub mod analysis;
-pub mod frames;
 pub mod dem;
+pub mod frames;
 pub mod matchplot;
 pub mod onboard;
 pub mod reference;

@@ -46,11 +46,20 @@ pub struct FrameRun {
 }
 
 /// Run the Navigator on one frame.
-pub fn run_frame(nav: &Navigator<'_>, ws: &mut Workspace, input: FrameInput<'_>, prior: Option<&Prior>) -> Result<FrameRun, NavError> {
+pub fn run_frame(
+    nav: &Navigator<'_>,
+    ws: &mut Workspace,
+    input: FrameInput<'_>,
+    prior: Option<&Prior>,
+) -> Result<FrameRun, NavError> {
     let t = Instant::now();
     let report = match input {
-        FrameInput::Dem(z, w, h, px) => nav.locate_dem(ws, &DemPatch::new_checked(z, w, h, px as f32)?, prior)?,
-        FrameInput::Slope(s, w, h, px) => nav.locate_slope(ws, &SlopeImage::new_checked(s, w, h, px as f32)?, prior)?,
+        FrameInput::Dem(z, w, h, px) => {
+            nav.locate_dem(ws, &DemPatch::new_checked(z, w, h, px as f32)?, prior)?
+        }
+        FrameInput::Slope(s, w, h, px) => {
+            nav.locate_slope(ws, &SlopeImage::new_checked(s, w, h, px as f32)?, prior)?
+        }
     };
     let time_ms = t.elapsed().as_secs_f64() * 1e3;
     let feats = ws.features().as_slice();
@@ -64,7 +73,11 @@ pub fn run_frame(nav: &Navigator<'_>, ws: &mut Workspace, input: FrameInput<'_>,
             Some((f.x_px, f.y_px, t.x_px, t.y_px, inl))
         })
         .collect();
-    Ok(FrameRun { report, time_ms, pairs })
+    Ok(FrameRun {
+        report,
+        time_ms,
+        pairs,
+    })
 }
 
 /// Run `f` on a thread with room to build a [`Workspace`] in place, and wait for it.

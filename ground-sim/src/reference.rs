@@ -13,7 +13,9 @@ use nav_core::{SlopeImage, SurfConfig, Tile};
 use serde::Serialize;
 
 use crate::analysis::slope_deg;
-use crate::dem::{Dem, GeoRef, GeoTransform, Interpolation, read_geotiff, resample_to_pixel, write_geotiff};
+use crate::dem::{
+    Dem, GeoRef, GeoTransform, Interpolation, read_geotiff, resample_to_pixel, write_geotiff,
+};
 use crate::tile::{GeoGrid, build_tile};
 
 /// Tile blob file name.
@@ -58,7 +60,11 @@ pub fn load(dir: &Path) -> Result<Reference> {
     let tile_bytes = std::fs::read(&tp).with_context(|| format!("reading {}", tp.display()))?;
     Tile::parse(&tile_bytes).map_err(|e| anyhow::anyhow!("{}: {e}", tp.display()))?;
     let sp = dir.join(SLOPE_FILE);
-    let slope = if sp.exists() { Some(read_geotiff(&sp).with_context(|| format!("reading {}", sp.display()))?) } else { None };
+    let slope = if sp.exists() {
+        Some(read_geotiff(&sp).with_context(|| format!("reading {}", sp.display()))?)
+    } else {
+        None
+    };
     Ok(Reference { tile_bytes, slope })
 }
 
@@ -70,7 +76,11 @@ pub fn block_mean(dem: &Dem, factor: usize) -> Result<Dem> {
     }
     let (w, h) = (dem.width() / factor, dem.height() / factor);
     if w == 0 || h == 0 {
-        bail!("DEM {}x{} is smaller than one {factor}x{factor} block", dem.width(), dem.height());
+        bail!(
+            "DEM {}x{} is smaller than one {factor}x{factor} block",
+            dem.width(),
+            dem.height()
+        );
     }
     let mut z = vec![0.0f32; w * h];
     for r in 0..h {
@@ -78,7 +88,9 @@ pub fn block_mean(dem: &Dem, factor: usize) -> Result<Dem> {
             let mut acc = 0.0f64;
             for j in 0..factor {
                 for i in 0..factor {
-                    acc += dem.get(c * factor + i, r * factor + j).map_or(f64::NAN, f64::from);
+                    acc += dem
+                        .get(c * factor + i, r * factor + j)
+                        .map_or(f64::NAN, f64::from);
                 }
             }
             z[r * w + c] = (acc / (factor * factor) as f64) as f32;
@@ -86,7 +98,14 @@ pub fn block_mean(dem: &Dem, factor: usize) -> Result<Dem> {
     }
     let t = dem.geo.transform.0;
     let geo = GeoRef {
-        transform: GeoTransform([t[0], t[1] * factor as f64, t[2], t[3], t[4], t[5] * factor as f64]),
+        transform: GeoTransform([
+            t[0],
+            t[1] * factor as f64,
+            t[2],
+            t[3],
+            t[4],
+            t[5] * factor as f64,
+        ]),
         ..dem.geo.clone()
     };
     Ok(Dem::new(w, h, z, geo)?)
@@ -105,14 +124,28 @@ pub fn reference_dem(dem: &Dem, pixel_m: f64) -> Result<Dem> {
 
 /// Slope map (degrees) of a DEM as a DEM-shaped raster with the same geo-reference.
 pub fn slope_map(dem: &Dem) -> Result<Dem> {
-    Ok(Dem::new(dem.width(), dem.height(), slope_deg(dem)?, dem.geo.clone())?)
+    Ok(Dem::new(
+        dem.width(),
+        dem.height(),
+        slope_deg(dem)?,
+        dem.geo.clone(),
+    )?)
 }
 
 /// Build the tile from a reference DEM and write the folder. Returns the summary.
-pub fn write_reference(ref_dem: &Dem, dir: &Path, cfg: &SurfConfig, max_features: usize) -> Result<TileSummary> {
+pub fn write_reference(
+    ref_dem: &Dem,
+    dir: &Path,
+    cfg: &SurfConfig,
+    max_features: usize,
+) -> Result<TileSummary> {
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let slope = slope_map(ref_dem)?;
-    let px: Vec<_> = slope.heights_m().iter().map(|&d| slope_from_deg(d)).collect();
+    let px: Vec<_> = slope
+        .heights_m()
+        .iter()
+        .map(|&d| slope_from_deg(d))
+        .collect();
     let pixel_m = ref_dem.pixel_m()?;
     let img = SlopeImage::new_checked(&px, slope.width(), slope.height(), pixel_m as f32)
         .map_err(|e| anyhow::anyhow!("reference slope: {e}"))?;
@@ -133,7 +166,9 @@ pub fn write_reference(ref_dem: &Dem, dir: &Path, cfg: &SurfConfig, max_features
             .collect(),
     };
     let bytes = build_tile(&img, &grid, cfg, max_features)?;
-    let features = Tile::parse(&bytes).map(|t| t.len()).map_err(|e| anyhow::anyhow!("{e}"))?;
+    let features = Tile::parse(&bytes)
+        .map(|t| t.len())
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
     std::fs::write(dir.join(TILE_FILE), &bytes)?;
     write_geotiff(&slope, &dir.join(SLOPE_FILE), None)?;
     write_geotiff(ref_dem, &dir.join(DEM_FILE), None)?;
@@ -146,6 +181,9 @@ pub fn write_reference(ref_dem: &Dem, dir: &Path, cfg: &SurfConfig, max_features
         threshold: cfg.detector.threshold,
         octaves: cfg.detector.octaves,
     };
-    std::fs::write(dir.join(META_FILE), serde_json::to_string_pretty(&summary)? + "\n")?;
+    std::fs::write(
+        dir.join(META_FILE),
+        serde_json::to_string_pretty(&summary)? + "\n",
+    )?;
     Ok(summary)
 }

@@ -8,9 +8,19 @@ use crate::frames::FramePose;
 use crate::onboard::FrameRun;
 
 /// Truth map from frame pixels to tile pixels for a frame taken at `pose`.
-pub fn truth_to_tile(h: &TileHeader<'_>, pose: &FramePose, w: usize, hgt: usize, x: f64, y: f64) -> (f64, f64) {
+pub fn truth_to_tile(
+    h: &TileHeader<'_>,
+    pose: &FramePose,
+    w: usize,
+    hgt: usize,
+    x: f64,
+    y: f64,
+) -> (f64, f64) {
     let (gx, gy) = pose.frame_to_geo(x, y, w, hgt);
-    ((gx - h.origin_x_m) / h.pixel_x_m, (gy - h.origin_y_m) / h.pixel_y_m)
+    (
+        (gx - h.origin_x_m) / h.pixel_x_m,
+        (gy - h.origin_y_m) / h.pixel_y_m,
+    )
 }
 
 /// Scores of one frame (the JSON of `ground-sim trn`, one row of `eval`).
@@ -60,7 +70,13 @@ pub fn wrap_deg(d: f64) -> f64 {
 }
 
 /// Score a frame run against its truth pose. `frame_w`, `frame_h` in pixels.
-pub fn score(tile: &Tile<'_>, run: &FrameRun, pose: &FramePose, frame_w: usize, frame_h: usize) -> TrnScore {
+pub fn score(
+    tile: &Tile<'_>,
+    run: &FrameRun,
+    pose: &FramePose,
+    frame_w: usize,
+    frame_h: usize,
+) -> TrnScore {
     let h = tile.header();
     let scale_truth = pose.pixel_m / h.pixel_m();
     let mut s = TrnScore {
@@ -80,10 +96,22 @@ pub fn score(tile: &Tile<'_>, run: &FrameRun, pose: &FramePose, frame_w: usize, 
     s
 }
 
-fn fill_fix(s: &mut TrnScore, f: &Fix, h: &TileHeader<'_>, pose: &FramePose, w: usize, hh: usize, run: &FrameRun) {
+fn fill_fix(
+    s: &mut TrnScore,
+    f: &Fix,
+    h: &TileHeader<'_>,
+    pose: &FramePose,
+    w: usize,
+    hh: usize,
+    run: &FrameRun,
+) {
     let rot = f.similarity.rotation_rad.to_degrees();
     // A north-up tile (pixel_y < 0) has pixel axes east/south, the frame heading's own axes.
-    let expect = if h.pixel_y_m < 0.0 { pose.heading_rad.to_degrees() } else { -pose.heading_rad.to_degrees() };
+    let expect = if h.pixel_y_m < 0.0 {
+        pose.heading_rad.to_degrees()
+    } else {
+        -pose.heading_rad.to_degrees()
+    };
     s.rotation_deg = Some(rot);
     s.heading_err_deg = Some(wrap_deg(rot - expect));
     s.scale = Some(f.similarity.scale);

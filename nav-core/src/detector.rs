@@ -64,7 +64,7 @@ impl Default for DetectorConfig {
         Self {
             octaves: 3,
             layers: 4,
-            threshold: 0.3,
+            threshold: 0.1,
             min_scale_px: 0.0,
         }
     }

@@ -293,7 +293,10 @@ impl<const MAX_PX: usize> SlopeBuffer<MAX_PX> {
 
     /// [`Self::compute_from`] with isolated dropouts filled (see
     /// [`crate::slope::slope_into_with`]).
-    pub fn compute_from_filled(&mut self, dem: &DemPatch<'_>) -> Result<SlopeImage<'_>, FrameError> {
+    pub fn compute_from_filled(
+        &mut self,
+        dem: &DemPatch<'_>,
+    ) -> Result<SlopeImage<'_>, FrameError> {
         let img = crate::slope::slope_into_with(dem, &mut self.px, true)?;
         self.width = img.width();
         self.height = img.height();
@@ -302,12 +305,69 @@ impl<const MAX_PX: usize> SlopeBuffer<MAX_PX> {
     }
 
     /// Slope of `dem` binned `k × k` (see [`crate::slope::slope_into_binned`]).
-    pub fn compute_binned(&mut self, dem: &DemPatch<'_>, k: usize, fill: bool) -> Result<SlopeImage<'_>, FrameError> {
+    pub fn compute_binned(
+        &mut self,
+        dem: &DemPatch<'_>,
+        k: usize,
+        fill: bool,
+    ) -> Result<SlopeImage<'_>, FrameError> {
         let img = crate::slope::slope_into_binned(dem, k, &mut self.px, fill)?;
         self.width = img.width();
         self.height = img.height();
         self.pixel_m = img.pixel_m();
         Ok(img)
+    }
+
+    /// Block-average `img` by `k × k` (mean of the valid raw values of each block; a block with
+    /// fewer than half valid is no data) into this buffer; pixel size `k × img.pixel_m()`.
+    pub fn bin_from(
+        &mut self,
+        img: &SlopeImage<'_>,
+        k: usize,
+    ) -> Result<SlopeImage<'_>, FrameError> {
+        if k == 0 || k > crate::slope::MAX_BIN {
+            return Err(FrameError::TooLarge {
+                needed: k,
+                capacity: crate::slope::MAX_BIN,
+            });
+        }
+        let (w, h) = (img.width() / k, img.height() / k);
+        if w == 0 || h == 0 {
+            return Err(FrameError::Empty);
+        }
+        let n = w * h;
+        let out = self.px.get_mut(..n).ok_or(FrameError::TooLarge {
+            needed: n,
+            capacity: MAX_PX,
+        })?;
+        let half = (k * k).div_ceil(2) as u32;
+        for r in 0..h {
+            for c in 0..w {
+                let (mut sum, mut cnt) = (0u32, 0u32);
+                for j in 0..k {
+                    for i in 0..k {
+                        let p = img.get(c * k + i, r * k + j);
+                        if slope_is_valid(p) {
+                            sum += p.to_bits() as u32;
+                            cnt += 1;
+                        }
+                    }
+                }
+                let v = if cnt >= half {
+                    // Rounded integer mean: exact and identical on every target.
+                    SlopePx::from_bits(((sum + cnt / 2) / cnt) as u16)
+                } else {
+                    SLOPE_NODATA
+                };
+                if let Some(o) = out.get_mut(r * w + c) {
+                    *o = v;
+                }
+            }
+        }
+        self.width = w;
+        self.height = h;
+        self.pixel_m = img.pixel_m() * k as f32;
+        self.image()
     }
 
     /// The last computed image.

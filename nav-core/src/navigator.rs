@@ -57,8 +57,8 @@ pub struct NavConfig {
     /// Fill isolated height dropouts before computing slope (see
     /// [`crate::slope::slope_into_with`]).
     pub fill_dropouts: bool,
-    /// Bin DEM frames finer than the tile to about the tile's ground sample distance
-    /// (`k = round(tile pixel / frame pixel)` when that is ≥ 2) before slope and SURF: both
+    /// Bin frames (DEM or slope) finer than the tile to about the tile's ground sample distance
+    /// (`k = ⌊tile pixel / frame pixel + 0.3⌋` when that is ≥ 2) before slope and SURF: both
     /// slopes then see the same scale of terrain, keypoints land more consistently, and the
     /// frame has k² times fewer pixels to process. Keypoints and the fix stay in frame pixels.
     pub bin_to_tile: bool,
@@ -222,8 +222,14 @@ impl<'t> Navigator<'t> {
         if !self.cfg.bin_to_tile || !(frame_pixel_m > 0.0) {
             return 1;
         }
-        let k = libm::roundf(self.tile.header().pixel_m() as f32 / frame_pixel_m);
-        if k >= 2.0 { (k as usize).min(crate::slope::MAX_BIN) } else { 1 }
+        // Round down unless nearly up: binning must not make the frame much coarser than the
+        // tile (a 2.5× finer frame bins by 2, a 1.8× finer one still by 2).
+        let k = libm::floorf(self.tile.header().pixel_m() as f32 / frame_pixel_m + 0.3);
+        if k >= 2.0 {
+            (k as usize).min(crate::slope::MAX_BIN)
+        } else {
+            1
+        }
     }
 
     /// SURF settings for a frame of `frame_pixel_m` metres per pixel: the tile's, with the
@@ -236,7 +242,8 @@ impl<'t> Navigator<'t> {
             // The tile's largest scales appear `ratio` times larger in the frame: one more
             // octave per doubling keeps them detectable.
             let extra = libm::roundf(libm::log2f(ratio)).clamp(0.0, 2.0) as u8;
-            cfg.detector.octaves = (cfg.detector.octaves + extra).min(crate::detector::MAX_OCTAVES as u8);
+            cfg.detector.octaves =
+                (cfg.detector.octaves + extra).min(crate::detector::MAX_OCTAVES as u8);
         } else {
             cfg.detector.min_scale_px = 0.0;
         }
@@ -277,8 +284,16 @@ impl<'t> Navigator<'t> {
         img: &SlopeImage<'_>,
         prior: Option<&Prior>,
     ) -> Result<FrameReport, NavError> {
-        let cfg = self.frame_surf_config(img.pixel_m());
-        extract(img, &cfg, ws.surf.scratch(), &mut ws.features)?;
+        let k = self.bin_factor(img.pixel_m());
+        if k > 1 {
+            let binned = ws.slope.bin_from(img, k)?;
+            let cfg = self.frame_surf_config(binned.pixel_m());
+            extract(&binned, &cfg, ws.surf.scratch(), &mut ws.features)?;
+            ws.features.unbin(k);
+        } else {
+            let cfg = self.frame_surf_config(img.pixel_m());
+            extract(img, &cfg, ws.surf.scratch(), &mut ws.features)?;
+        }
         Ok(self.locate_features(ws, img.width(), img.height(), prior))
     }
 

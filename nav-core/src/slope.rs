@@ -60,7 +60,10 @@ pub fn slope_into_binned<'b>(
     fill_isolated: bool,
 ) -> Result<SlopeImage<'b>, FrameError> {
     if k == 0 || k > MAX_BIN {
-        return Err(FrameError::TooLarge { needed: k, capacity: MAX_BIN });
+        return Err(FrameError::TooLarge {
+            needed: k,
+            capacity: MAX_BIN,
+        });
     }
     let (w, h) = (dem.width() / k, dem.height() / k);
     if w == 0 || h == 0 {
@@ -122,7 +125,13 @@ fn slope_grid<'b>(
 
 /// Height at `(col, row)` from `z`, or the mean of its valid 8-neighbours when it is missing and
 /// at least [`FILL_MIN_NEIGHBOURS`] of them are valid (in a fixed order, so deterministic).
-fn filled(z: &impl Fn(usize, usize) -> Option<f32>, w: usize, h: usize, col: usize, row: usize) -> Option<f32> {
+fn filled(
+    z: &impl Fn(usize, usize) -> Option<f32>,
+    w: usize,
+    h: usize,
+    col: usize,
+    row: usize,
+) -> Option<f32> {
     if let Some(v) = z(col, row) {
         return Some(v);
     }
@@ -144,7 +153,12 @@ fn filled(z: &impl Fn(usize, usize) -> Option<f32>, w: usize, h: usize, col: usi
 
 /// Horn slope in degrees at an interior pixel; `None` if any of the 9 heights is masked.
 #[inline]
-fn horn(z: &impl Fn(usize, usize) -> Option<f32>, col: usize, row: usize, inv8: f32) -> Option<f32> {
+fn horn(
+    z: &impl Fn(usize, usize) -> Option<f32>,
+    col: usize,
+    row: usize,
+    inv8: f32,
+) -> Option<f32> {
     let z = |dc: usize, dr: usize| z(col + dc - 1, row + dr - 1);
     let (a, b, c) = (z(0, 0)?, z(1, 0)?, z(2, 0)?);
     let (d, f) = (z(0, 1)?, z(2, 1)?);
@@ -225,7 +239,10 @@ mod tests {
         for r in 1..7 {
             for c in 1..7 {
                 let got = slope_to_deg(img.get(c, r)).unwrap();
-                assert!((got - expect).abs() <= 2.0 * SLOPE_LSB_DEG, "{got} vs {expect}");
+                assert!(
+                    (got - expect).abs() <= 2.0 * SLOPE_LSB_DEG,
+                    "{got} vs {expect}"
+                );
             }
         }
         // A 3 × 3 hole is too large: its centre stays masked.

@@ -113,7 +113,13 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
     let reference = load(&a.tile)?;
     let tile = Tile::parse(&reference.tile_bytes).map_err(|e| anyhow!("{e}"))?;
     let dem = read_geotiff(&a.dem).with_context(|| format!("reading {}", a.dem.display()))?;
-    let sensor = SensorModel { width_px: a.size_px, height_px: a.size_px, range_noise_m: a.noise_m, dropout_frac: a.dropout, ..SensorModel::default() };
+    let sensor = SensorModel {
+        width_px: a.size_px,
+        height_px: a.size_px,
+        range_noise_m: a.noise_m,
+        dropout_frac: a.dropout,
+        ..SensorModel::default()
+    };
     // Frame centres: inside both the tile and the DEM, a frame's reach from every edge.
     let h = tile.header();
     let (tx0, ty0) = h.pixel_to_geo(0.0, 0.0);
@@ -123,18 +129,26 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
     let (x0, x1) = (tx0.min(tx1).max(dx0) + reach, tx0.max(tx1).min(dx1) - reach);
     let (y0, y1) = (ty0.min(ty1).max(dy0) + reach, ty0.max(ty1).min(dy1) - reach);
     if !(x1 > x0 && y1 > y0) {
-        bail!("the tile and DEM overlap leaves no room for a {}-px frame at {} m", a.size_px, a.pixel_max_m);
+        bail!(
+            "the tile and DEM overlap leaves no room for a {}-px frame at {} m",
+            a.size_px,
+            a.pixel_max_m
+        );
     }
     let nav = Navigator::new(tile, NavConfig::default());
     let pb = super::progress(a.trials as u64, "eval");
     let done = AtomicUsize::new(0);
-    let pool = rayon::ThreadPoolBuilder::new().stack_size(WORKSPACE_STACK).build()?;
+    let pool = rayon::ThreadPoolBuilder::new()
+        .stack_size(WORKSPACE_STACK)
+        .build()?;
     let rows: Vec<anyhow::Result<TrnScore>> = pool.install(|| {
         (0..a.trials)
             .into_par_iter()
             .map_init(new_workspace, |ws, i| {
                 // Each trial has its own seed: results do not depend on the thread count.
-                let mut rng = rand_pcg::Pcg64::seed_from_u64(a.seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ i as u64);
+                let mut rng = rand_pcg::Pcg64::seed_from_u64(
+                    a.seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ i as u64,
+                );
                 let pose = FramePose {
                     x_m: x0 + (x1 - x0) * rng.random::<f64>(),
                     y_m: y0 + (y1 - y0) * rng.random::<f64>(),
@@ -142,8 +156,13 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
                     pixel_m: a.pixel_min_m + (a.pixel_max_m - a.pixel_min_m) * rng.random::<f64>(),
                 };
                 let frame = synth_frame(&dem, &pose, &sensor, rng.random::<u64>())?;
-                let run = run_frame(&nav, ws, FrameInput::Dem(&frame.heights_m, frame.width, frame.height, pose.pixel_m), None)
-                    .map_err(|e| anyhow!("trial {i}: {e}"))?;
+                let run = run_frame(
+                    &nav,
+                    ws,
+                    FrameInput::Dem(&frame.heights_m, frame.width, frame.height, pose.pixel_m),
+                    None,
+                )
+                .map_err(|e| anyhow!("trial {i}: {e}"))?;
                 pb.set_position(done.fetch_add(1, Ordering::Relaxed) as u64 + 1);
                 Ok(score(nav.tile(), &run, &pose, frame.width, frame.height))
             })
@@ -155,13 +174,24 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
     let fixes: Vec<&TrnScore> = rows.iter().filter(|r| r.fix).collect();
     let good: Vec<&TrnScore> = fixes.iter().copied().filter(|r| !r.false_fix).collect();
     let mut pos: Vec<f64> = good.iter().filter_map(|r| r.pos_err_m).collect();
-    let mut head: Vec<f64> = fixes.iter().filter_map(|r| r.heading_err_deg.map(f64::abs)).collect();
-    let mut scl: Vec<f64> = fixes.iter().filter_map(|r| r.scale.map(|s| (s / r.scale_truth - 1.0).abs())).collect();
+    let mut head: Vec<f64> = fixes
+        .iter()
+        .filter_map(|r| r.heading_err_deg.map(f64::abs))
+        .collect();
+    let mut scl: Vec<f64> = fixes
+        .iter()
+        .filter_map(|r| r.scale.map(|s| (s / r.scale_truth - 1.0).abs()))
+        .collect();
     let reg: Vec<f64> = fixes.iter().filter_map(|r| r.pos_err_mean_px).collect();
-    let within = fixes.iter().filter(|r| matches!((r.pos_err_m, r.center_sigma_m), (Some(e), Some(s)) if e <= 3.0 * s)).count();
+    let within = fixes
+        .iter()
+        .filter(|r| matches!((r.pos_err_m, r.center_sigma_m), (Some(e), Some(s)) if e <= 3.0 * s))
+        .count();
     let mut reasons = std::collections::BTreeMap::new();
     for r in rows.iter().filter(|r| !r.fix) {
-        *reasons.entry(r.no_fix_reason.clone().unwrap_or_default()).or_insert(0) += 1;
+        *reasons
+            .entry(r.no_fix_reason.clone().unwrap_or_default())
+            .or_insert(0) += 1;
     }
     let summary = EvalSummary {
         trials: rows.len(),
@@ -184,28 +214,80 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
     };
     head.clear();
     println!("trials      {} (seed {})", summary.trials, summary.seed);
-    println!("success     {:.2} %  false fix {:.2} %  no fix {:.2} %", summary.success_rate * 100.0, summary.false_fix_rate * 100.0, summary.no_fix_rate * 100.0);
-    println!("position    p50 {:.2} m  p95 {:.2} m  max {:.2} m", summary.pos_err_p50_m, summary.pos_err_p95_m, summary.pos_err_max_m);
-    println!("heading     p95 {:.3}°  max {:.3}°;  scale error p95 {:.3} %", summary.heading_err_p95_deg, summary.heading_err_max_deg, summary.scale_err_p95 * 100.0);
-    println!("consistency {:.1} % of fixes within their 3σ; mean onboard time {:.2} ms", summary.within_3sigma_frac * 100.0, summary.time_ms_mean);
+    println!(
+        "success     {:.2} %  false fix {:.2} %  no fix {:.2} %",
+        summary.success_rate * 100.0,
+        summary.false_fix_rate * 100.0,
+        summary.no_fix_rate * 100.0
+    );
+    println!(
+        "position    p50 {:.2} m  p95 {:.2} m  max {:.2} m",
+        summary.pos_err_p50_m, summary.pos_err_p95_m, summary.pos_err_max_m
+    );
+    println!(
+        "heading     p95 {:.3}°  max {:.3}°;  scale error p95 {:.3} %",
+        summary.heading_err_p95_deg,
+        summary.heading_err_max_deg,
+        summary.scale_err_p95 * 100.0
+    );
+    println!(
+        "consistency {:.1} % of fixes within their 3σ; mean onboard time {:.2} ms",
+        summary.within_3sigma_frac * 100.0,
+        summary.time_ms_mean
+    );
     if !summary.no_fix_reasons.is_empty() {
         println!("no fix      {:?}", summary.no_fix_reasons);
     }
     super::write_json(&a.json, &summary)?;
-    let csv_path = a.csv.clone().unwrap_or_else(|| a.json.with_extension("csv"));
-    let mut csv = std::io::BufWriter::new(std::fs::File::create(&csv_path).with_context(|| format!("creating {}", csv_path.display()))?);
-    writeln!(csv, "trial,x_m,y_m,heading_deg,pixel_m,fix,false_fix,features,matches,inliers,rotation_deg,heading_err_deg,scale,scale_truth,pos_err_m,center_err_px,reg_err_mean_px,reg_err_max_px,center_sigma_m,time_ms,no_fix_reason")?;
+    let csv_path = a
+        .csv
+        .clone()
+        .unwrap_or_else(|| a.json.with_extension("csv"));
+    let mut csv = std::io::BufWriter::new(
+        std::fs::File::create(&csv_path)
+            .with_context(|| format!("creating {}", csv_path.display()))?,
+    );
+    writeln!(
+        csv,
+        "trial,x_m,y_m,heading_deg,pixel_m,fix,false_fix,features,matches,inliers,rotation_deg,heading_err_deg,scale,scale_truth,pos_err_m,center_err_px,reg_err_mean_px,reg_err_max_px,center_sigma_m,time_ms,no_fix_reason"
+    )?;
     let o = |v: Option<f64>| v.map_or(String::new(), |x| format!("{x:.6}"));
     for (i, r) in rows.iter().enumerate() {
-        let t = r.truth.unwrap_or(FramePose { x_m: f64::NAN, y_m: f64::NAN, heading_rad: f64::NAN, pixel_m: f64::NAN });
+        let t = r.truth.unwrap_or(FramePose {
+            x_m: f64::NAN,
+            y_m: f64::NAN,
+            heading_rad: f64::NAN,
+            pixel_m: f64::NAN,
+        });
         writeln!(
             csv,
             "{i},{:.3},{:.3},{:.4},{:.4},{},{},{},{},{},{},{},{},{:.6},{},{},{},{},{},{:.3},{}",
-            t.x_m, t.y_m, t.heading_rad.to_degrees(), t.pixel_m, r.fix, r.false_fix, r.features, r.matches, r.inliers,
-            o(r.rotation_deg), o(r.heading_err_deg), o(r.scale), r.scale_truth, o(r.pos_err_m), o(r.center_err_px), o(r.pos_err_mean_px), o(r.pos_err_max_px), o(r.center_sigma_m), r.time_ms,
+            t.x_m,
+            t.y_m,
+            t.heading_rad.to_degrees(),
+            t.pixel_m,
+            r.fix,
+            r.false_fix,
+            r.features,
+            r.matches,
+            r.inliers,
+            o(r.rotation_deg),
+            o(r.heading_err_deg),
+            o(r.scale),
+            r.scale_truth,
+            o(r.pos_err_m),
+            o(r.center_err_px),
+            o(r.pos_err_mean_px),
+            o(r.pos_err_max_px),
+            o(r.center_sigma_m),
+            r.time_ms,
             r.no_fix_reason.as_deref().unwrap_or("")
         )?;
     }
-    println!("json        {}\ncsv         {}", a.json.display(), csv_path.display());
+    println!(
+        "json        {}\ncsv         {}",
+        a.json.display(),
+        csv_path.display()
+    );
     Ok(())
 }

@@ -37,9 +37,23 @@ pub struct Args {
 pub fn run(a: &Args) -> anyhow::Result<()> {
     let dem = read_geotiff(&a.dem).with_context(|| format!("reading {}", a.dem.display()))?;
     let r = reference_dem(&dem, a.pixel_m)?;
-    let cfg = SurfConfig { detector: DetectorConfig { threshold: a.threshold, ..Default::default() }, upright: false };
+    let cfg = SurfConfig {
+        detector: DetectorConfig {
+            threshold: a.threshold,
+            ..Default::default()
+        },
+        upright: false,
+    };
     let s = write_reference(&r, &a.out, &cfg, a.max_features.min(MAX_TILE_FEATURES))?;
-    println!("reference  {}x{} px at {} m: {} features, {} bytes -> {}", s.width_px, s.height_px, s.pixel_m, s.features, s.tile_bytes, a.out.display());
+    println!(
+        "reference  {}x{} px at {} m: {} features, {} bytes -> {}",
+        s.width_px,
+        s.height_px,
+        s.pixel_m,
+        s.features,
+        s.tile_bytes,
+        a.out.display()
+    );
     if let Some(j) = &a.json {
         super::write_json(j, &s)?;
     }

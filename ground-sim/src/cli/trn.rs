@@ -58,18 +58,47 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
     let tile = Tile::parse(&reference.tile_bytes).map_err(|e| anyhow!("{e}"))?;
     let dem = read_geotiff(&a.dem).with_context(|| format!("reading {}", a.dem.display()))?;
     let h = tile.header();
-    let (cx, cy) = h.pixel_to_geo((h.width_px as f64 - 1.0) / 2.0, (h.height_px as f64 - 1.0) / 2.0);
-    let pose = FramePose { x_m: a.x_m.unwrap_or(cx), y_m: a.y_m.unwrap_or(cy), heading_rad: a.heading_deg.to_radians(), pixel_m: a.pixel_m };
-    let sensor = SensorModel { width_px: a.size_px, height_px: a.size_px, range_noise_m: a.noise_m, dropout_frac: a.dropout, ..SensorModel::default() };
+    let (cx, cy) = h.pixel_to_geo(
+        (h.width_px as f64 - 1.0) / 2.0,
+        (h.height_px as f64 - 1.0) / 2.0,
+    );
+    let pose = FramePose {
+        x_m: a.x_m.unwrap_or(cx),
+        y_m: a.y_m.unwrap_or(cy),
+        heading_rad: a.heading_deg.to_radians(),
+        pixel_m: a.pixel_m,
+    };
+    let sensor = SensorModel {
+        width_px: a.size_px,
+        height_px: a.size_px,
+        range_noise_m: a.noise_m,
+        dropout_frac: a.dropout,
+        ..SensorModel::default()
+    };
     let frame = synth_frame(&dem, &pose, &sensor, a.seed)?;
     let nav = Navigator::new(tile, NavConfig::default());
     let run = with_big_stack(|| {
         let mut ws = new_workspace();
-        run_frame(&nav, &mut ws, FrameInput::Dem(&frame.heights_m, frame.width, frame.height, a.pixel_m), None).map_err(|e| anyhow!("{e}"))
+        run_frame(
+            &nav,
+            &mut ws,
+            FrameInput::Dem(&frame.heights_m, frame.width, frame.height, a.pixel_m),
+            None,
+        )
+        .map_err(|e| anyhow!("{e}"))
     })?;
     let s = score(&tile, &run, &pose, frame.width, frame.height);
-    println!("frame      {}x{} px at {} m, heading {:.1}°, centre ({:.1}, {:.1}) m", frame.width, frame.height, a.pixel_m, a.heading_deg, pose.x_m, pose.y_m);
-    println!("features   {} frame, {} tile; matches {}, inliers {}", s.features, nav.tile().len(), s.matches, s.inliers);
+    println!(
+        "frame      {}x{} px at {} m, heading {:.1}°, centre ({:.1}, {:.1}) m",
+        frame.width, frame.height, a.pixel_m, a.heading_deg, pose.x_m, pose.y_m
+    );
+    println!(
+        "features   {} frame, {} tile; matches {}, inliers {}",
+        s.features,
+        nav.tile().len(),
+        s.matches,
+        s.inliers
+    );
     let d = run.report.detect_stats;
     println!(
         "detector   {} maxima: {} on no data, {} refused by refinement, {} below the tile's scale",
@@ -77,7 +106,10 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
     );
     match (s.rotation_deg, s.heading_err_deg, s.scale, s.pos_err_m) {
         (Some(r), Some(he), Some(sc), Some(pe)) => {
-            println!("rotation   {r:.3}° (error {he:+.3}°), scale {sc:.4} (truth {:.4})", s.scale_truth);
+            println!(
+                "rotation   {r:.3}° (error {he:+.3}°), scale {sc:.4} (truth {:.4})",
+                s.scale_truth
+            );
             println!(
                 "position   error {pe:.2} m = {:.3} ref px; registration error mean {:.3} / max {:.3} ref px{}",
                 s.center_err_px.unwrap_or(f64::NAN),
@@ -95,10 +127,18 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
     }
     if let Some(p) = &a.png {
         let fs = ground_sim::frames::frame_slope_deg(&frame);
-        let ref_slope = reference.slope.as_ref().ok_or_else(|| anyhow!("{} has no slope.tif for the picture", a.tile.display()))?;
-        let img = match_picture((&fs, frame.width, frame.height), (ref_slope.heights_m(), ref_slope.width(), ref_slope.height()), &run.pairs);
+        let ref_slope = reference
+            .slope
+            .as_ref()
+            .ok_or_else(|| anyhow!("{} has no slope.tif for the picture", a.tile.display()))?;
+        let img = match_picture(
+            (&fs, frame.width, frame.height),
+            (ref_slope.heights_m(), ref_slope.width(), ref_slope.height()),
+            &run.pairs,
+        );
         super::ensure_parent(p)?;
-        img.save(p).with_context(|| format!("writing {}", p.display()))?;
+        img.save(p)
+            .with_context(|| format!("writing {}", p.display()))?;
         println!("picture    {}", p.display());
     }
     Ok(())
