@@ -34,7 +34,7 @@ fn filter_is_consistent_and_rejects_outliers() {
     let (mut in_band, mut checks, mut rejected, mut outliers, mut accepted_outliers) =
         (0, 0, 0, 0, 0);
     let mut last_err = 0.0f64;
-    for step in 1..=120_00 {
+    for step in 1..=12_000 {
         // Truth advances (exact for the constant turn at this step size).
         yaw += yaw_rate * dt;
         x += speed * yaw.cos() * dt;
