@@ -26,9 +26,11 @@
 
 pub mod analysis;
 pub mod dem;
+pub mod descent;
 pub mod frames;
 pub mod matchplot;
 pub mod onboard;
+pub mod plot;
 pub mod reference;
 pub mod register;
 pub mod render;

@@ -34,6 +34,8 @@ enum Commands {
     Trn(cli::trn::Args),
     /// Monte-Carlo campaign of frames at random poses against a reference tile.
     Eval(cli::eval::Args),
+    /// Campaign of closed-loop hops: dynamics, IMU, TRN fixes, nav filter, guidance.
+    Descent(cli::descent::Args),
     /// Simulate dual-antenna SAR echoes over a DEM and focus them into SLCs.
     Sar(SarArgs),
     /// Point-target analysis (IRW, PSLR, ISLR, peak location, interferometric phase).
@@ -53,6 +55,7 @@ fn main() -> ExitCode {
         Commands::Tile(a) => cli::tile::run(a),
         Commands::Trn(a) => cli::trn::run(a),
         Commands::Eval(a) => cli::eval::run(a),
+        Commands::Descent(a) => cli::descent::run(a),
         Commands::Sar(a) => run_sar(a.clone()),
         Commands::Psf(a) => run_psf(a.clone()),
     };

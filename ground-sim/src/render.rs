@@ -13,8 +13,8 @@ use crate::dem::{Dem, DemError};
 
 /// Glyph scale: 8×8 font glyphs drawn as 16×16 pixels.
 const FONT_SCALE: u32 = 2;
-/// Glyph cell size in output pixels.
-const GLYPH: u32 = 8 * FONT_SCALE;
+/// Character cell of [`draw_text`] in output pixels.
+pub const GLYPH: u32 = 8 * FONT_SCALE;
 /// Largest picture side; bigger DEMs are decimated for display.
 pub const MAX_PICTURE_SIDE: usize = 2048;
 /// Colour-bar width in pixels.
@@ -144,7 +144,8 @@ pub fn ticks(lo: f64, hi: f64) -> Vec<f64> {
     v
 }
 
-fn fmt_tick(v: f64, step: f64) -> String {
+/// Format a tick value with as many decimals as its step needs.
+pub fn fmt_tick(v: f64, step: f64) -> String {
     if step >= 1.0 {
         format!("{v:.0}")
     } else {
@@ -153,8 +154,9 @@ fn fmt_tick(v: f64, step: f64) -> String {
     }
 }
 
-/// Draw `text` with its top-left corner at `(x, y)`.
-fn draw_text(img: &mut RgbImage, x: u32, y: u32, text: &str, colour: [u8; 3]) {
+/// Draw `text` with its top-left corner at `(x, y)` (8×8 glyphs scaled by the picture font
+/// scale; [`GLYPH`] pixels per character).
+pub fn draw_text(img: &mut RgbImage, x: u32, y: u32, text: &str, colour: [u8; 3]) {
     for (k, ch) in text.chars().enumerate() {
         let glyph = font8x8::legacy::BASIC_LEGACY
             .get(ch as usize)

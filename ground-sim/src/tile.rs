@@ -6,8 +6,9 @@ use nav_core::surf::{Scratch, scratch_len};
 use nav_core::tile::{MAX_HEADER_LEN, TileHeader, tile_len, write_tile};
 use nav_core::{Features, SlopeImage, SurfConfig, extract};
 
-/// Most features a ground-built tile holds (the flight matcher's cost grows linearly with it).
-pub const MAX_TILE_FEATURES: usize = 1024;
+/// Most features a ground-built tile holds: 8192 × 280 B = 2.2 MiB of flash. The flight matcher
+/// only compares the features inside the prior's footprint, so a large map stays affordable.
+pub const MAX_TILE_FEATURES: usize = 8192;
 
 /// Geo-reference of a tile's pixel grid: the centre of pixel (0, 0) and the step per
 /// column/row, metres in the named projection.
@@ -34,18 +35,21 @@ pub fn tile_features(
     let (n_int, n_ring) = scratch_len(slope.width(), slope.height());
     let mut integral = vec![0u32; n_int];
     let mut ring = vec![0.0f32; n_ring];
-    let mut feats = Box::new(Features::<MAX_TILE_FEATURES>::new());
-    extract(
-        slope,
-        cfg,
-        Scratch {
-            integral: &mut integral,
-            ring: &mut ring,
-        },
-        &mut feats,
-    )
-    .map_err(|e| anyhow::anyhow!("SURF on the reference slope: {e}"))?;
-    Ok(feats)
+    // The feature set is a few MiB of fixed arrays: build it where the stack has room.
+    crate::onboard::with_big_stack(|| {
+        let mut feats = Box::new(Features::<MAX_TILE_FEATURES>::new());
+        extract(
+            slope,
+            cfg,
+            Scratch {
+                integral: &mut integral,
+                ring: &mut ring,
+            },
+            &mut feats,
+        )
+        .map_err(|e| anyhow::anyhow!("SURF on the reference slope: {e}"))?;
+        Ok(feats)
+    })
 }
 
 /// Build a tile blob from a slope image: features by nav-core (the strongest `max_features`, at

@@ -352,6 +352,50 @@ impl NavFilter {
         self.update(y, h, r, self.cfg.fix_gate_chi2)
     }
 
+    /// Update with an attitude measurement (e.g. a star tracker): roll, pitch, yaw in radians
+    /// (intrinsic Z-Y-X, yaw about +z from east), isotropic 1σ `sigma_rad`.
+    pub fn update_attitude(
+        &mut self,
+        roll_rad: f64,
+        pitch_rad: f64,
+        yaw_rad: f64,
+        sigma_rad: f64,
+    ) -> Result<UpdateOutcome, FilterError> {
+        if !([roll_rad, pitch_rad, yaw_rad, sigma_rad]
+            .iter()
+            .all(|v| v.is_finite())
+            && sigma_rad > 0.0)
+        {
+            return Err(FilterError::NotFinite);
+        }
+        let meas = UnitQuaternion::from_euler_angles(roll_rad, pitch_rad, yaw_rad);
+        // Nav-frame rotation from the estimate to the measurement: the δθ it observes.
+        let d: Vector3<f64> = (meas * self.q.inverse()).scaled_axis();
+        let y = SVector::<f64, 3>::new(d.x, d.y, d.z);
+        let h = SMatrix::<f64, 3, 15>::from_fn(|i, j| if j == 6 + i { 1.0 } else { 0.0 });
+        let r =
+            SMatrix::<f64, 3, 3>::from_fn(|i, j| if i == j { sigma_rad * sigma_rad } else { 0.0 });
+        self.update(y, h, r, self.cfg.fix_gate_chi2)
+    }
+
+    /// Update with a velocity measurement (ENU, m/s; e.g. a Doppler lidar velocimeter), isotropic
+    /// 1σ `sigma_mps`.
+    pub fn update_velocity(
+        &mut self,
+        v_mps: [f64; 3],
+        sigma_mps: f64,
+    ) -> Result<UpdateOutcome, FilterError> {
+        if !(finite3(&v_mps) && sigma_mps.is_finite() && sigma_mps > 0.0) {
+            return Err(FilterError::NotFinite);
+        }
+        let y = Vector3::from(v_mps) - self.v;
+        let y = SVector::<f64, 3>::new(y.x, y.y, y.z);
+        let h = SMatrix::<f64, 3, 15>::from_fn(|i, j| if j == 3 + i { 1.0 } else { 0.0 });
+        let r =
+            SMatrix::<f64, 3, 3>::from_fn(|i, j| if i == j { sigma_mps * sigma_mps } else { 0.0 });
+        self.update(y, h, r, self.cfg.fix_gate_chi2)
+    }
+
     /// Update with an altitude measurement (m, ENU z) of 1σ `sigma_m`.
     pub fn update_altitude(
         &mut self,

@@ -3,6 +3,7 @@
 //! `Commands` in `main.rs`.
 
 pub mod demo;
+pub mod descent;
 pub mod eval;
 pub mod info;
 pub mod register;

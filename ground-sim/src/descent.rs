@@ -1,0 +1,420 @@
+//! Closed-loop hops: a flyer released over the truth terrain flies to a landing target, its IMU
+//! propagates nav-core's filter, its ranging sensor's frames go through nav-core's Navigator
+//! against the reference tile (with the filter's prior), the fixes update the filter, and simple
+//! guidance steers on the estimate. Scores: landing error, navigation error, filter consistency.
+//!
+//! Frames: navigation ENU (x east, y north, z up, the DEM's projection metres). Body yaw ψ from
+//! east towards north; the flyer stays level. The sensor looks down with columns along body x,
+//! so a frame's heading (clockwise from east) is −ψ.
+
+use nav_core::filter::{FilterConfig, FixMeasurement, InitialState, NavFilter, UpdateOutcome};
+use nav_core::{Navigator, Prior};
+use rand::{RngExt, SeedableRng};
+use serde::Serialize;
+
+use crate::dem::Dem;
+use crate::frames::{FramePose, SensorModel, height_at_geo, synth_frame};
+use crate::onboard::{FrameInput, Workspace, run_frame};
+
+/// Scenario and vehicle settings.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct DescentConfig {
+    /// Cruise height above the release point's terrain, m.
+    pub cruise_agl_m: f64,
+    /// Sensor angular pixel size, rad: frame pixel = height above terrain × this.
+    pub ifov_rad: f64,
+    /// Cruise ground speed, m/s.
+    pub cruise_speed_mps: f64,
+    /// Largest descent rate, m/s.
+    pub descent_rate_mps: f64,
+    /// Largest commanded acceleration per axis, m/s².
+    pub accel_max_mps2: f64,
+    /// TRN frames per second.
+    pub frame_rate_hz: f64,
+    /// IMU samples per second.
+    pub imu_rate_hz: f64,
+    /// No TRN below this height above terrain (frames too fine for the tile), m.
+    pub min_fix_agl_m: f64,
+    /// Shortest hop, m.
+    pub hop_min_m: f64,
+    /// Longest hop, m.
+    pub hop_max_m: f64,
+    /// 1σ of the initial horizontal position knowledge, m.
+    pub release_sigma_m: f64,
+    /// 1σ accelerometer bias of the unit (drawn per run), m/s².
+    pub accel_bias_sigma: f64,
+    /// 1σ gyro bias of the unit (drawn per run), rad/s.
+    pub gyro_bias_sigma: f64,
+    /// 1σ altimeter noise, m.
+    pub altimeter_sigma_m: f64,
+    /// 1σ star-tracker attitude noise per axis, rad (0: no star tracker). Without it, gyro bias
+    /// tilts the estimated vertical and g·tilt drifts the position once TRN stops.
+    pub star_tracker_sigma_rad: f64,
+    /// 1σ Doppler-velocimeter noise per axis, m/s (0: none). Below the last TRN fix (frames too
+    /// fine for the 20 m tile) only velocity aiding keeps the position from drifting.
+    pub velocimeter_sigma_mps: f64,
+    /// Fix position covariance inflation (variance factor) for the filter: keypoint errors are
+    /// correlated within a frame, so the fix's own residual-based covariance is optimistic.
+    pub fix_cov_inflation: f64,
+    /// Ranging sensor.
+    pub sensor: SensorModel,
+    /// Filter noise model (also the IMU's simulated noise densities).
+    #[serde(skip)]
+    pub filter: FilterConfig,
+}
+
+impl Default for DescentConfig {
+    fn default() -> Self {
+        Self {
+            cruise_agl_m: 3800.0,
+            ifov_rad: 10.0 / 3800.0,
+            cruise_speed_mps: 80.0,
+            descent_rate_mps: 40.0,
+            accel_max_mps2: 3.0,
+            frame_rate_hz: 1.0,
+            imu_rate_hz: 100.0,
+            min_fix_agl_m: 2000.0,
+            hop_min_m: 2000.0,
+            hop_max_m: 15000.0,
+            release_sigma_m: 100.0,
+            accel_bias_sigma: 0.003,
+            gyro_bias_sigma: 2e-5,
+            altimeter_sigma_m: 1.0,
+            // 10 arcsec, a common star-tracker class; PSRs still see the sky.
+            star_tracker_sigma_rad: 4.8e-5,
+            velocimeter_sigma_mps: 0.05,
+            fix_cov_inflation: 4.0,
+            sensor: SensorModel::default(),
+            filter: FilterConfig::default(),
+        }
+    }
+}
+
+/// One sample of a run's history (at the frame rate).
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct Sample {
+    /// Time since release, s.
+    pub t_s: f64,
+    /// True position, m.
+    pub truth_m: [f64; 3],
+    /// Estimated position, m.
+    pub est_m: [f64; 3],
+    /// 1σ of east and north, m.
+    pub sigma_m: [f64; 2],
+    /// Horizontal NEES (χ² with 2 dof if consistent).
+    pub nees: f64,
+    /// 0 no frame, 1 fix accepted, 2 fix rejected by the filter gate, 3 no fix.
+    pub fix_state: u8,
+    /// Fix position (if any), m.
+    pub fix_m: Option<[f64; 2]>,
+}
+
+/// Outcome of one hop.
+#[derive(Debug, Clone, Serialize)]
+pub struct RunResult {
+    /// Run index.
+    pub run: usize,
+    /// Release point, m.
+    pub release_m: [f64; 2],
+    /// Target, m.
+    pub target_m: [f64; 2],
+    /// Hop length, m.
+    pub hop_m: f64,
+    /// Flight time, s.
+    pub flight_s: f64,
+    /// Horizontal distance from the landing point to the target, m.
+    pub landing_err_m: f64,
+    /// Horizontal navigation error at touchdown, m.
+    pub nav_err_at_landing_m: f64,
+    /// Horizontal navigation error at the last accepted fix, m.
+    pub nav_err_at_last_fix_m: f64,
+    /// Horizontal velocity error at the last accepted fix, m/s.
+    pub vel_err_at_last_fix_mps: f64,
+    /// Time from the last accepted fix to touchdown, s.
+    pub unaided_s: f64,
+    /// RMS horizontal navigation error over the flight (frame times), m.
+    pub nav_err_rms_m: f64,
+    /// Fixes accepted by the filter.
+    pub fixes: usize,
+    /// Fixes rejected by the filter's gate.
+    pub rejected_fixes: usize,
+    /// Frames without a fix.
+    pub no_fixes: usize,
+    /// Fraction of frame times with the horizontal NEES inside the 95 % χ²(2) band.
+    pub nees_in_band_frac: f64,
+    /// History at the frame rate.
+    #[serde(skip)]
+    pub history: Vec<Sample>,
+}
+
+/// Horizontal NEES of error `(ex, ey)` under covariance `c` (m²).
+fn nees2(ex: f64, ey: f64, c: [[f64; 2]; 2]) -> f64 {
+    let det = c[0][0] * c[1][1] - c[0][1] * c[1][0];
+    if !(det > 0.0) {
+        return f64::INFINITY;
+    }
+    (c[1][1] * ex * ex - (c[0][1] + c[1][0]) * ex * ey + c[0][0] * ey * ey) / det
+}
+
+fn normal(rng: &mut rand_pcg::Pcg64) -> f64 {
+    let u: f64 = rng.random::<f64>().max(1e-300);
+    let v: f64 = rng.random::<f64>();
+    (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
+}
+
+/// Fly one hop from `release` to `target` (east, north; metres).
+#[allow(clippy::too_many_arguments)]
+pub fn fly(
+    run: usize,
+    dem: &Dem,
+    nav: &Navigator<'_>,
+    ws: &mut Workspace,
+    cfg: &DescentConfig,
+    release: [f64; 2],
+    target: [f64; 2],
+    seed: u64,
+) -> anyhow::Result<RunResult> {
+    let mut rng = rand_pcg::Pcg64::seed_from_u64(seed);
+    let g = cfg.filter.gravity_mps2;
+    let ground = |x: f64, y: f64| height_at_geo(dem, x, y) as f64;
+    let z0 = ground(release[0], release[1]);
+    if !z0.is_finite() {
+        anyhow::bail!("release point outside the DEM");
+    }
+    let z_cruise = z0 + cfg.cruise_agl_m;
+    let dt = 1.0 / cfg.imu_rate_hz;
+    let frame_every = (cfg.imu_rate_hz / cfg.frame_rate_hz).round().max(1.0) as usize;
+    // Truth state.
+    let (mut p, mut v) = ([release[0], release[1], z_cruise], [0.0f64; 3]);
+    let bearing = (target[1] - release[1]).atan2(target[0] - release[0]);
+    let yaw0 = bearing + 0.3 * normal(&mut rng);
+    let ba = [0, 1, 2].map(|_| cfg.accel_bias_sigma * normal(&mut rng));
+    let bg = [0, 1, 2].map(|_| cfg.gyro_bias_sigma * normal(&mut rng));
+    // Estimate.
+    let init = InitialState {
+        position_m: [
+            p[0] + cfg.release_sigma_m * normal(&mut rng),
+            p[1] + cfg.release_sigma_m * normal(&mut rng),
+            p[2] + 5.0 * normal(&mut rng),
+        ],
+        velocity_mps: [0.0; 3],
+        yaw_rad: yaw0 + 1f64.to_radians() * normal(&mut rng),
+        position_sigma_m: cfg.release_sigma_m,
+        velocity_sigma_mps: 0.2,
+        attitude_sigma_rad: 1f64.to_radians(),
+        accel_bias_sigma: cfg.accel_bias_sigma.max(1e-4),
+        gyro_bias_sigma: cfg.gyro_bias_sigma.max(1e-7),
+    };
+    let mut filt = NavFilter::new(&init, cfg.filter);
+    let tile = nav.tile();
+    let th = tile.header();
+    let tile_px = th.pixel_m();
+    let mut out = RunResult {
+        run,
+        release_m: release,
+        target_m: target,
+        hop_m: (target[0] - release[0]).hypot(target[1] - release[1]),
+        flight_s: 0.0,
+        landing_err_m: f64::NAN,
+        nav_err_at_landing_m: f64::NAN,
+        nav_err_at_last_fix_m: f64::NAN,
+        vel_err_at_last_fix_mps: f64::NAN,
+        unaided_s: f64::NAN,
+        nav_err_rms_m: f64::NAN,
+        fixes: 0,
+        rejected_fixes: 0,
+        no_fixes: 0,
+        nees_in_band_frac: f64::NAN,
+        history: Vec::new(),
+    };
+    let max_steps = (1800.0 * cfg.imu_rate_hz) as usize;
+    let mut landed = false;
+    for step in 1..=max_steps {
+        let t = step as f64 * dt;
+        // Yaw: the initial heading plus a slow ±10° sweep (exercises the gyro and rotation).
+        let yaw = yaw0 + 10f64.to_radians() * (std::f64::consts::TAU * t / 60.0).sin();
+        let yaw_rate = 10f64.to_radians() * std::f64::consts::TAU / 60.0
+            * (std::f64::consts::TAU * t / 60.0).cos();
+        // Guidance on the estimate.
+        let pe = filt.position_m();
+        let ve = filt.velocity_mps();
+        let (dx, dy) = (target[0] - pe[0], target[1] - pe[1]);
+        let dist = dx.hypot(dy);
+        let agl_est = pe[2] - ground(pe[0], pe[1]).max(f64::MIN);
+        let speed = cfg.cruise_speed_mps.min(0.08 * dist);
+        let (vdx, vdy) = if dist > 1e-6 {
+            (speed * dx / dist, speed * dy / dist)
+        } else {
+            (0.0, 0.0)
+        };
+        let mut a_cmd = [0.6 * (vdx - ve[0]), 0.6 * (vdy - ve[1]), 0.0];
+        let vz_des = if dist > 60.0 {
+            0.4 * (z_cruise - pe[2]).clamp(-cfg.descent_rate_mps, cfg.descent_rate_mps)
+        } else {
+            // Over the target: descend fast (drift without fixes grows with time), slowing near
+            // the ground for touchdown.
+            -(0.1 * agl_est.max(0.0)).clamp(1.5, cfg.descent_rate_mps)
+        };
+        a_cmd[2] = 0.8 * (vz_des - ve[2]);
+        for a in &mut a_cmd {
+            *a = a.clamp(-cfg.accel_max_mps2, cfg.accel_max_mps2);
+        }
+        // Truth dynamics: commanded acceleration plus a small disturbance.
+        let a_true = [0, 1, 2].map(|k| a_cmd[k] + 0.005 * normal(&mut rng));
+        for k in 0..3 {
+            p[k] += v[k] * dt + 0.5 * a_true[k] * dt * dt;
+            v[k] += a_true[k] * dt;
+        }
+        // IMU: specific force f = a − g in the body frame (level, yawed), plus bias and noise.
+        let f_n = [a_true[0], a_true[1], a_true[2] + g];
+        let (s, c) = yaw.sin_cos();
+        let f_b = [c * f_n[0] + s * f_n[1], -s * f_n[0] + c * f_n[1], f_n[2]];
+        let an = cfg.filter.accel_noise / dt.sqrt();
+        let gn = cfg.filter.gyro_noise / dt.sqrt();
+        let accel = [0, 1, 2].map(|k| f_b[k] + ba[k] + an * normal(&mut rng));
+        let gyro = [
+            bg[0] + gn * normal(&mut rng),
+            bg[1] + gn * normal(&mut rng),
+            yaw_rate + bg[2] + gn * normal(&mut rng),
+        ];
+        filt.propagate(dt, accel, gyro)
+            .map_err(|e| anyhow::anyhow!("filter: {e}"))?;
+        let agl = p[2] - ground(p[0], p[1]);
+        if agl.is_nan() {
+            anyhow::bail!("run {run}: the flyer left the DEM at t = {t:.1} s");
+        }
+        if agl <= 0.0 {
+            landed = true;
+            out.flight_s = t;
+            break;
+        }
+        if step % frame_every != 0 {
+            continue;
+        }
+        let mut fix_state = 0u8;
+        let mut fix_m = None;
+        filt.update_altitude(
+            p[2] + cfg.altimeter_sigma_m * normal(&mut rng),
+            cfg.altimeter_sigma_m,
+        )
+        .map_err(|e| anyhow::anyhow!("filter: {e}"))?;
+        if cfg.velocimeter_sigma_mps > 0.0 {
+            let sv = cfg.velocimeter_sigma_mps;
+            filt.update_velocity([0, 1, 2].map(|k| v[k] + sv * normal(&mut rng)), sv)
+                .map_err(|e| anyhow::anyhow!("filter: {e}"))?;
+        }
+        if cfg.star_tracker_sigma_rad > 0.0 {
+            let st = cfg.star_tracker_sigma_rad;
+            filt.update_attitude(
+                st * normal(&mut rng),
+                st * normal(&mut rng),
+                yaw + st * normal(&mut rng),
+                st,
+            )
+            .map_err(|e| anyhow::anyhow!("filter: {e}"))?;
+        }
+        if agl >= cfg.min_fix_agl_m {
+            let pixel_m = agl * cfg.ifov_rad;
+            let pose = FramePose {
+                x_m: p[0],
+                y_m: p[1],
+                heading_rad: -yaw,
+                pixel_m,
+            };
+            if let Ok(frame) = synth_frame(dem, &pose, &cfg.sensor, rng.random::<u64>()) {
+                let pe = filt.position_m();
+                let pc = filt.horizontal_cov_m2();
+                let prior = Prior {
+                    center_tile_px: [
+                        ((pe[0] - th.origin_x_m) / th.pixel_x_m) as f32,
+                        ((pe[1] - th.origin_y_m) / th.pixel_y_m) as f32,
+                    ],
+                    sigma_px: (pc[0][0].max(pc[1][1]).sqrt() / tile_px) as f32,
+                    heading_rad: (-filt.yaw_rad()) as f32,
+                    heading_sigma_rad: filt.yaw_sigma_rad().max(0.5f64.to_radians()) as f32,
+                    scale: (pixel_m / tile_px) as f32,
+                    scale_sigma: 0.02,
+                };
+                let r = run_frame(
+                    nav,
+                    ws,
+                    FrameInput::Dem(&frame.heights_m, frame.width, frame.height, pixel_m),
+                    Some(&prior),
+                )
+                .map_err(|e| anyhow::anyhow!("navigator: {e}"))?;
+                match r.report.outcome {
+                    Ok(f) => {
+                        let cg = f.center_cov_geo_m2;
+                        let k = cfg.fix_cov_inflation;
+                        // Floors: a fix is never better than a tenth of a tile pixel.
+                        let floor = (0.1 * tile_px).powi(2);
+                        let m = FixMeasurement {
+                            x_m: f.center_geo_m[0],
+                            y_m: f.center_geo_m[1],
+                            yaw_rad: -f.similarity.rotation_rad,
+                            position_cov_m2: [
+                                [(k * cg[0][0]).max(floor), k * cg[0][1]],
+                                [k * cg[1][0], (k * cg[1][1]).max(floor)],
+                            ],
+                            yaw_sigma_rad: (2.0 * f.heading_sigma_rad).max(0.1f64.to_radians()),
+                        };
+                        fix_m = Some(f.center_geo_m);
+                        match filt
+                            .update_fix(&m)
+                            .map_err(|e| anyhow::anyhow!("filter: {e}"))?
+                        {
+                            UpdateOutcome::Accepted { .. } => {
+                                out.fixes += 1;
+                                fix_state = 1;
+                                let (pe, ve) = (filt.position_m(), filt.velocity_mps());
+                                out.nav_err_at_last_fix_m = (p[0] - pe[0]).hypot(p[1] - pe[1]);
+                                out.vel_err_at_last_fix_mps = (v[0] - ve[0]).hypot(v[1] - ve[1]);
+                                out.unaided_s = t;
+                            }
+                            UpdateOutcome::Rejected { .. } => {
+                                out.rejected_fixes += 1;
+                                fix_state = 2;
+                            }
+                        }
+                    }
+                    Err(_) => {
+                        out.no_fixes += 1;
+                        fix_state = 3;
+                    }
+                }
+            }
+        }
+        let pe = filt.position_m();
+        let c = filt.horizontal_cov_m2();
+        out.history.push(Sample {
+            t_s: t,
+            truth_m: p,
+            est_m: pe,
+            sigma_m: [c[0][0].max(0.0).sqrt(), c[1][1].max(0.0).sqrt()],
+            nees: nees2(p[0] - pe[0], p[1] - pe[1], c),
+            fix_state,
+            fix_m,
+        });
+    }
+    if !landed {
+        anyhow::bail!("run {run}: no touchdown within 30 minutes");
+    }
+    let pe = filt.position_m();
+    out.landing_err_m = (p[0] - target[0]).hypot(p[1] - target[1]);
+    out.nav_err_at_landing_m = (p[0] - pe[0]).hypot(p[1] - pe[1]);
+    out.unaided_s = out.flight_s - out.unaided_s;
+    let h = &out.history;
+    let n = h.len().max(1) as f64;
+    out.nav_err_rms_m = (h
+        .iter()
+        .map(|s| (s.truth_m[0] - s.est_m[0]).powi(2) + (s.truth_m[1] - s.est_m[1]).powi(2))
+        .sum::<f64>()
+        / n)
+        .sqrt();
+    out.nees_in_band_frac = h
+        .iter()
+        .filter(|s| (0.0506..=7.378).contains(&s.nees))
+        .count() as f64
+        / n;
+    Ok(out)
+}
