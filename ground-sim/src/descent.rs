@@ -142,6 +142,8 @@ pub struct RunResult {
     pub no_fixes: usize,
     /// Fraction of frame times with the horizontal NEES inside the 95 % χ²(2) band.
     pub nees_in_band_frac: f64,
+    /// Mean horizontal NEES (2 for a consistent filter; smaller: pessimistic covariance).
+    pub nees_mean: f64,
     /// History at the frame rate.
     #[serde(skip)]
     pub history: Vec<Sample>,
@@ -225,6 +227,7 @@ pub fn fly(
         rejected_fixes: 0,
         no_fixes: 0,
         nees_in_band_frac: f64::NAN,
+        nees_mean: f64::NAN,
         history: Vec::new(),
     };
     let max_steps = (1800.0 * cfg.imu_rate_hz) as usize;
@@ -416,5 +419,6 @@ pub fn fly(
         .filter(|s| (0.0506..=7.378).contains(&s.nees))
         .count() as f64
         / n;
+    out.nees_mean = h.iter().map(|s| s.nees).sum::<f64>() / n;
     Ok(out)
 }

@@ -77,6 +77,8 @@ pub struct DescentSummary {
     pub no_fixes: usize,
     /// Fraction of frame times with the horizontal NEES in the 95 % χ²(2) band.
     pub nees_in_band_frac: f64,
+    /// Mean horizontal NEES over all runs (2 for a consistent filter).
+    pub nees_mean: f64,
     /// Mean hop length, m.
     pub hop_mean_m: f64,
     /// Mean flight time, s.
@@ -193,6 +195,13 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         rejected_fixes: per_run.iter().map(|r| r.rejected_fixes).sum(),
         no_fixes: per_run.iter().map(|r| r.no_fixes).sum(),
         nees_in_band_frac: in_band as f64 / samples.max(1) as f64,
+        nees_mean: per_run
+            .iter()
+            .flat_map(|r| r.history.iter())
+            .map(|s| s.nees)
+            .filter(|v| v.is_finite())
+            .sum::<f64>()
+            / samples.max(1) as f64,
         hop_mean_m: per_run.iter().map(|r| r.hop_m).sum::<f64>() / per_run.len() as f64,
         flight_mean_s: per_run.iter().map(|r| r.flight_s).sum::<f64>() / per_run.len() as f64,
         config: cfg,

@@ -21,13 +21,13 @@ pub struct Args {
     #[arg(long)]
     pub dem: PathBuf,
     /// Frame heading: its +x axis, clockwise from east, degrees.
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     pub heading_deg: f64,
     /// Frame centre east, metres (default: the tile centre).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub x_m: Option<f64>,
     /// Frame centre north, metres (default: the tile centre).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub y_m: Option<f64>,
     /// Frame pixel size, metres (the paper: 10).
     #[arg(long, default_value_t = 10.0)]

@@ -1,0 +1,150 @@
+//! Closed loop through the CLI: reference folder from a generated DEM, one TRN frame, a small
+//! eval campaign and a short descent campaign. Figures are asserted with floors near what these
+//! seeds give (the full campaigns are recorded in docs/results.md).
+
+use std::path::Path;
+use std::process::Command;
+
+fn run(args: &[&str]) -> String {
+    let out = Command::new(env!("CARGO_BIN_EXE_ground-sim"))
+        .args(args)
+        .output()
+        .unwrap();
+    let text = format!(
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(out.status.success(), "ground-sim {args:?} failed:\n{text}");
+    text
+}
+
+fn json(p: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap()
+}
+
+#[test]
+fn tile_trn_eval_and_descent_on_a_generated_scene() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = |f: &str| dir.path().join(f).to_str().unwrap().to_string();
+    // An 8 km Shoemaker-like floor at 10 m: room for 2-3 km hops with 2 km frames.
+    run(&[
+        "terrain",
+        "--preset",
+        "shoemaker",
+        "--seed",
+        "3",
+        "--size-m",
+        "8000",
+        "--pixel-m",
+        "10",
+        "--out",
+        &d("dem.tif"),
+    ]);
+    run(&["tile", "--dem", &d("dem.tif"), "--out", &d("ref")]);
+    let meta = json(&dir.path().join("ref/tile.json"));
+    assert!(meta["features"].as_u64().unwrap() > 300, "{meta}");
+
+    // The paper's geometry: a 10 m frame against the 20 m reference, rotated 45°.
+    let text = run(&[
+        "trn",
+        "--tile",
+        &d("ref"),
+        "--dem",
+        &d("dem.tif"),
+        "--heading-deg",
+        "45",
+        "--x-m",
+        "300",
+        "--y-m",
+        "-200",
+        "--png",
+        &d("trn.png"),
+        "--json",
+        &d("trn.json"),
+    ]);
+    println!("{text}");
+    let t = json(&dir.path().join("trn.json"));
+    for k in [
+        "matches",
+        "inliers",
+        "rotation_deg",
+        "heading_err_deg",
+        "scale",
+        "pos_err_mean_px",
+        "pos_err_max_px",
+        "pos_err_m",
+    ] {
+        assert!(!t[k].is_null(), "trn JSON lacks {k}: {t}");
+    }
+    assert!(t["heading_err_deg"].as_f64().unwrap().abs() < 0.5, "{t}");
+    assert!(t["pos_err_mean_px"].as_f64().unwrap() < 0.5, "{t}");
+    assert!(t["pos_err_max_px"].as_f64().unwrap() < 1.0, "{t}");
+    assert!(dir.path().join("trn.png").exists());
+
+    let text = run(&[
+        "eval",
+        "--tile",
+        &d("ref"),
+        "--dem",
+        &d("dem.tif"),
+        "--trials",
+        "40",
+        "--seed",
+        "5",
+        "--json",
+        &d("eval.json"),
+    ]);
+    println!("{text}");
+    let e = json(&dir.path().join("eval.json"));
+    for k in [
+        "trials",
+        "success_rate",
+        "false_fix_rate",
+        "pos_err_p50_m",
+        "pos_err_p95_m",
+        "heading_err_p95_deg",
+    ] {
+        assert!(!e[k].is_null(), "eval JSON lacks {k}: {e}");
+    }
+    assert_eq!(e["trials"], 40);
+    assert_eq!(e["false_fix_rate"].as_f64().unwrap(), 0.0, "{e}");
+    assert!(e["success_rate"].as_f64().unwrap() >= 0.95, "{e}");
+    assert!(e["pos_err_p95_m"].as_f64().unwrap() <= 20.0, "{e}");
+    let csv = std::fs::read_to_string(dir.path().join("eval.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 41);
+
+    let text = run(&[
+        "descent",
+        "--tile",
+        &d("ref"),
+        "--dem",
+        &d("dem.tif"),
+        "--runs",
+        "2",
+        "--seed",
+        "2",
+        "--hop-min-m",
+        "2000",
+        "--hop-max-m",
+        "3000",
+        "--json",
+        &d("descent.json"),
+    ]);
+    println!("{text}");
+    let s = json(&dir.path().join("descent.json"));
+    for k in [
+        "runs",
+        "landing_err_p50_m",
+        "landing_err_p95_m",
+        "nav_err_rms_m",
+        "fixes",
+        "rejected_fixes",
+        "nees_in_band_frac",
+    ] {
+        assert!(!s[k].is_null(), "descent JSON lacks {k}: {s}");
+    }
+    assert!(s["fixes"].as_u64().unwrap() > 50, "{s}");
+    assert!(s["landing_err_p95_m"].as_f64().unwrap() < 10.0, "{s}");
+    assert!(dir.path().join("descent-trajectory.png").exists());
+}
