@@ -36,6 +36,8 @@ enum Commands {
     Eval(cli::eval::Args),
     /// Campaign of closed-loop hops: dynamics, IMU, TRN fixes, nav filter, guidance.
     Descent(cli::descent::Args),
+    /// Regenerate docs/results.md from fresh runs (paper cases, campaigns, descents).
+    Results(cli::results::Args),
     /// Simulate dual-antenna SAR echoes over a DEM and focus them into SLCs.
     Sar(SarArgs),
     /// Point-target analysis (IRW, PSLR, ISLR, peak location, interferometric phase).
@@ -46,7 +48,18 @@ enum Commands {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
-    let result = match &cli.command {
+    match dispatch(cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+/// Run one parsed command line.
+fn dispatch(cli: Cli) -> anyhow::Result<()> {
+    match &cli.command {
         Commands::Terrain(a) => cli::terrain::run(a),
         Commands::Info(a) => cli::info::run(a),
         Commands::Resample(a) => cli::resample::run(a),
@@ -58,12 +71,6 @@ fn main() -> ExitCode {
         Commands::Descent(a) => cli::descent::run(a),
         Commands::Sar(a) => run_sar(a.clone()),
         Commands::Psf(a) => run_psf(a.clone()),
-    };
-    match result {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("error: {e:#}");
-            ExitCode::FAILURE
-        }
+        Commands::Results(a) => cli::results::run(a, &|args| dispatch(Cli::try_parse_from(args)?)),
     }
 }

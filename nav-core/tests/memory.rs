@@ -1,7 +1,7 @@
 //! Memory for one 256 × 256 frame: slope frame + integral image + response ring + keypoints.
 //! Sizes come from `size_of`, so they are exact and the same on every run.
 
-use nav_core::{Features, SlopeBuffer, SurfWorkspace};
+use nav_core::{Features, NavWorkspace, SlopeBuffer, SurfWorkspace};
 
 /// Largest frame side the flight configuration supports.
 const SIDE: usize = 256;
@@ -26,4 +26,15 @@ fn memory_for_a_256_frame_fits_512_kib() {
         total as f64 / 1024.0
     );
     assert!(total <= 512 * 1024, "{total} B exceeds 512 KiB");
+}
+
+#[test]
+fn navigator_workspace_for_a_256_frame() {
+    // Slope buffer + SURF workspace + 256 features + 128 matches with their correspondences.
+    let ws = NavWorkspace::<{ SIDE * SIDE }, SIDE, KEYPOINTS, 128>::footprint_bytes();
+    println!(
+        "NavWorkspace<256x256, 256 keypoints, 128 matches> {ws} B = {:.1} KiB",
+        ws as f64 / 1024.0
+    );
+    assert!(ws <= 512 * 1024, "{ws} B exceeds 512 KiB");
 }

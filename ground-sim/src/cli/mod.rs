@@ -8,6 +8,7 @@ pub mod eval;
 pub mod info;
 pub mod register;
 pub mod resample;
+pub mod results;
 pub mod terrain;
 pub mod tile;
 pub mod trn;
