@@ -54,7 +54,9 @@ pub struct DescentConfig {
     /// fine for the 20 m tile) only velocity aiding keeps the position from drifting.
     pub velocimeter_sigma_mps: f64,
     /// Fix position covariance inflation (variance factor) for the filter: keypoint errors are
-    /// correlated within a frame, so the fix's own residual-based covariance is optimistic.
+    /// correlated within a frame and between frames over the same terrain, so the fix's own
+    /// residual-based covariance is optimistic. Measured on 12 hops (seed 1): factor 4 gave a mean
+    /// horizontal NEES of 5.1, factor 10 gives 1.6 (2 is consistent).
     pub fix_cov_inflation: f64,
     /// Ranging sensor.
     pub sensor: SensorModel,
@@ -83,7 +85,7 @@ impl Default for DescentConfig {
             // 10 arcsec, a common star-tracker class; PSRs still see the sky.
             star_tracker_sigma_rad: 4.8e-5,
             velocimeter_sigma_mps: 0.05,
-            fix_cov_inflation: 4.0,
+            fix_cov_inflation: 10.0,
             sensor: SensorModel::default(),
             filter: FilterConfig::default(),
         }
