@@ -107,6 +107,8 @@ pub fn run(a: &Args, dispatch: &dyn Fn(&[String]) -> anyhow::Result<()>) -> anyh
             &json,
             "--png",
             &w(&format!("trn-{preset}-{rot}.png")),
+            "--export",
+            &w(&format!("case-{preset}-{rot}")),
         ])?;
         let t = read(Path::new(&json))?;
         writeln!(
@@ -125,6 +127,7 @@ pub fn run(a: &Args, dispatch: &dyn Fn(&[String]) -> anyhow::Result<()>) -> anyh
         md,
         "\nRegistration error: the estimated map against the true map at every inlier's frame position, in reference (20 m) pixels; the paper's is presumably the residual against the matched points.\n"
     )?;
+    opencv_section(&mut md, a, &paper.map(|(p, r, _)| (p, r)))?;
     // Campaigns.
     writeln!(md, "## Monte-Carlo campaigns (`ground-sim eval`)\n")?;
     writeln!(
@@ -256,11 +259,99 @@ pub fn run(a: &Args, dispatch: &dyn Fn(&[String]) -> anyhow::Result<()>) -> anyh
     )?;
     writeln!(
         md,
-        "## Not yet here\n\n- The InSAR-derived reference instead of the truth DEM (the `insar` command writes the same reference folder; point `trn`/`eval` at it).\n- The OpenCV SIFT/ORB side-by-side.\n"
+        "## Not yet here\n\n- The InSAR-derived reference instead of the truth DEM (the `insar` command writes the same reference folder; point `trn`/`eval` at it).\n"
     )?;
     writeln!(md, "_Generated in {:.0} s._", t0.elapsed().as_secs_f64())?;
     super::ensure_parent(&a.out)?;
     std::fs::write(&a.out, md).with_context(|| format!("writing {}", a.out.display()))?;
     println!("\nwrote {}", a.out.display());
+    Ok(())
+}
+
+/// The same four frames registered by OpenCV SIFT and ORB (tools/opencv_compare.py in its own
+/// Python environment, made by tools/setup-opencv.sh), beside nav-core.
+fn opencv_section(md: &mut String, a: &Args, cases: &[(&str, f64)]) -> anyhow::Result<()> {
+    writeln!(md, "## The same frames with OpenCV SIFT and ORB\n")?;
+    let python = std::env::var("UMBRA_PYTHON")
+        .map(PathBuf::from)
+        .unwrap_or_else(|_| PathBuf::from("tools/.venv/bin/python"));
+    if !python.exists() {
+        writeln!(
+            md,
+            "Skipped: no OpenCV environment at `{}` (run `tools/setup-opencv.sh`, or set `UMBRA_PYTHON`).\n",
+            python.display()
+        )?;
+        println!("opencv comparison skipped: {} not found", python.display());
+        return Ok(());
+    }
+    let out = a.work.join("opencv.json");
+    let dirs: Vec<String> = cases
+        .iter()
+        .map(|(p, r)| {
+            a.work
+                .join(format!("case-{p}-{r}"))
+                .to_string_lossy()
+                .into_owned()
+        })
+        .collect();
+    let status = std::process::Command::new(&python)
+        .arg("tools/opencv_compare.py")
+        .arg(&out)
+        .args(&dirs)
+        .status()
+        .context("running tools/opencv_compare.py")?;
+    if !status.success() {
+        anyhow::bail!("tools/opencv_compare.py failed");
+    }
+    let v = read(&out)?;
+    writeln!(
+        md,
+        "Same exported frames and references (`ground-sim trn --export`), 8-bit slope images for OpenCV {}; Lowe ratio 0.8, RANSAC similarity (`estimateAffinePartial2D`, 3 px). nav-core's row is the table above; times are this host's, single frame, detection + matching + estimation.\n",
+        v["opencv"].as_str().unwrap_or("?")
+    )?;
+    writeln!(
+        md,
+        "| scene | rotation | method | matches | inliers | heading error (°) | mean / max reg. error (ref px) | centre error (ref px) | ms |"
+    )?;
+    writeln!(md, "|---|---|---|---|---|---|---|---|---|")?;
+    for (p, r) in cases {
+        let t = read(&a.work.join(format!("trn-{p}-{r}.json")))?;
+        writeln!(
+            md,
+            "| {p} | {r}° | nav-core | {} | {} | {} | {} / {} | {} | {} |",
+            t["matches"],
+            t["inliers"],
+            f(&t, "heading_err_deg", 3),
+            f(&t, "pos_err_mean_px", 2),
+            f(&t, "pos_err_max_px", 2),
+            f(&t, "center_err_px", 2),
+            f(&t, "time_ms", 1)
+        )?;
+        let case = a
+            .work
+            .join(format!("case-{p}-{r}"))
+            .to_string_lossy()
+            .into_owned();
+        for row in v["results"]
+            .as_array()
+            .into_iter()
+            .flatten()
+            .filter(|x| x["case"].as_str() == Some(case.as_str()))
+        {
+            writeln!(
+                md,
+                "| {p} | {r}° | {} | {} | {} | {} | {} / {} | {} | {} |",
+                row["method"].as_str().unwrap_or("?"),
+                row["matches"],
+                row.get("inliers").unwrap_or(&Value::Null),
+                f(row, "heading_err_deg", 3),
+                f(row, "pos_err_mean_px", 2),
+                f(row, "pos_err_max_px", 2),
+                f(row, "center_err_px", 2),
+                f(row, "time_ms", 1)
+            )?;
+        }
+    }
+    writeln!(md)?;
     Ok(())
 }

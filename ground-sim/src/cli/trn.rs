@@ -50,6 +50,10 @@ pub struct Args {
     /// JSON report.
     #[arg(long)]
     pub json: Option<PathBuf>,
+    /// Also export the frame and reference slope images (16-bit PNG, degrees × 512) and the true
+    /// frame → reference affine (`truth.json`) into this folder, for other registration tools.
+    #[arg(long)]
+    pub export: Option<PathBuf>,
 }
 
 /// Run `ground-sim trn`.
@@ -125,6 +129,16 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         super::write_json(j, &s)?;
         println!("json       {}", j.display());
     }
+    if let Some(dir) = &a.export {
+        export(
+            dir,
+            &frame,
+            reference.slope.as_ref(),
+            nav.tile().header(),
+            &pose,
+        )?;
+        println!("export     {}", dir.display());
+    }
     if let Some(p) = &a.png {
         let fs = ground_sim::frames::frame_slope_deg(&frame);
         let ref_slope = reference
@@ -141,5 +155,59 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
             .with_context(|| format!("writing {}", p.display()))?;
         println!("picture    {}", p.display());
     }
+    Ok(())
+}
+
+/// Write `frame_slope.png`, `reference_slope.png` (16-bit grey, raw nav-core slope: degrees × 512,
+/// 65535 = no data) and `truth.json` (the true frame → reference pixel affine).
+fn export(
+    dir: &std::path::Path,
+    frame: &ground_sim::frames::Frame,
+    ref_slope: Option<&ground_sim::dem::Dem>,
+    h: &nav_core::TileHeader<'_>,
+    pose: &ground_sim::frames::FramePose,
+) -> anyhow::Result<()> {
+    use nav_core::frame::slope_from_deg;
+    std::fs::create_dir_all(dir)?;
+    let png16 =
+        |vals: &[f32], w: usize, hh: usize, path: std::path::PathBuf| -> anyhow::Result<()> {
+            let raw: Vec<u16> = vals.iter().map(|&d| slope_from_deg(d).to_bits()).collect();
+            let img = image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_raw(
+                w as u32, hh as u32, raw,
+            )
+            .ok_or_else(|| anyhow!("image size"))?;
+            img.save(&path)
+                .with_context(|| format!("writing {}", path.display()))?;
+            Ok(())
+        };
+    png16(
+        &ground_sim::frames::frame_slope_deg(frame),
+        frame.width,
+        frame.height,
+        dir.join("frame_slope.png"),
+    )?;
+    let rs = ref_slope.ok_or_else(|| anyhow!("the reference folder has no slope.tif to export"))?;
+    png16(
+        rs.heights_m(),
+        rs.width(),
+        rs.height(),
+        dir.join("reference_slope.png"),
+    )?;
+    let t =
+        |x: f64, y: f64| ground_sim::trn::truth_to_tile(h, pose, frame.width, frame.height, x, y);
+    let (o, ex, ey) = (t(0.0, 0.0), t(1.0, 0.0), t(0.0, 1.0));
+    let truth = serde_json::json!({
+        "frame_width": frame.width,
+        "frame_height": frame.height,
+        "affine": [ex.0 - o.0, ey.0 - o.0, o.0, ex.1 - o.1, ey.1 - o.1, o.1],
+        "heading_deg": pose.heading_rad.to_degrees(),
+        "scale": pose.pixel_m / h.pixel_m(),
+        "reference_pixel_m": h.pixel_m(),
+        "note": "affine maps frame pixel (x = column, y = row, first pixel centre at 0,0) to reference pixels: X = m1 x + n1 y + p1, Y = m2 x + n2 y + p2",
+    });
+    std::fs::write(
+        dir.join("truth.json"),
+        serde_json::to_string_pretty(&truth)? + "\n",
+    )?;
     Ok(())
 }
