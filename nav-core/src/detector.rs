@@ -148,30 +148,178 @@ impl Keypoint {
     }
 }
 
-/// Sums of the three box-filter responses at one pixel, exact integers in raw slope units.
+/// The three box-filter responses at one pixel, exact integers in raw slope units.
+///
+/// `i32` with wrapping arithmetic is exact: every box sum is exact in `u32` (see
+/// [`crate::integral`]), and each response's true value is below 2³¹ in magnitude — the largest,
+/// `Dyy`/`Dxx` of the biggest filter a configuration allows (octave 4, layer 5: side 243, lobes of
+/// 81 × 161 px), is at most 2 · 81 · 161 · 46 080 ≈ 1.2·10⁹ — so the result modulo 2³² read as
+/// `i32` is the true value. (`i32` → `f32` is one instruction on a Cortex-M4F; `i64` → `f32` is a
+/// library call, which made up a sixth of a frame's instructions.)
 #[derive(Debug, Clone, Copy)]
 struct BoxResponses {
-    dxx: i64,
-    dyy: i64,
-    dxy: i64,
+    dxx: i32,
+    dyy: i32,
+    dxy: i32,
+}
+
+// The exactness argument above, for the largest filter any configuration can ask for.
+const _: () = {
+    let side = filter_side(MAX_OCTAVES - 1, MAX_LAYERS - 1) as u64;
+    let lobe = side / 3;
+    let wide = 2 * lobe - 1;
+    assert!(2 * lobe * wide * crate::frame::SLOPE_MAX_RAW as u64 <= i32::MAX as u64);
+    assert!(side * wide <= crate::integral::MAX_EXACT_BOX_PX);
+};
+
+/// The eight boxes of the three responses for one filter side, as `(x, y, w, h)` relative to the
+/// sample pixel: Dyy whole and middle, Dxx whole and middle, Dxy's four lobes (+, +, −, −).
+fn boxes(side: isize) -> [(isize, isize, isize, isize); 8] {
+    let lobe = side / 3;
+    let half = (side - 1) / 2;
+    let wide = 2 * lobe - 1;
+    [
+        (-(lobe - 1), -half, wide, side),
+        (-(lobe - 1), -(lobe - 1) / 2, wide, lobe),
+        (-half, -(lobe - 1), side, wide),
+        (-(lobe - 1) / 2, -(lobe - 1), lobe, wide),
+        (-lobe, -lobe, lobe, lobe),
+        (1, 1, lobe, lobe),
+        (1, -lobe, lobe, lobe),
+        (-lobe, 1, lobe, lobe),
+    ]
+}
+
+#[inline(always)]
+fn combine(b: [u32; 8]) -> BoxResponses {
+    // Second derivatives: the whole three-lobe box minus three times its middle lobe gives the
+    // (+1, −2, +1) pattern with two box sums instead of three.
+    let [y1, y2, x1, x2, p1, p2, m1, m2] = b;
+    BoxResponses {
+        dyy: y1.wrapping_sub(y2.wrapping_mul(3)) as i32,
+        dxx: x1.wrapping_sub(x2.wrapping_mul(3)) as i32,
+        dxy: p1.wrapping_add(p2).wrapping_sub(m1).wrapping_sub(m2) as i32,
+    }
 }
 
 #[inline(always)]
 fn box_responses(ii: &Integral<'_>, x: isize, y: isize, side: isize) -> BoxResponses {
-    let lobe = side / 3;
-    let half = (side - 1) / 2;
-    let wide = 2 * lobe - 1;
-    let b = |x, y, w, h| ii.box_sum_inside(x, y, w, h) as i64;
-    // Second derivatives: the whole three-lobe box minus three times its middle lobe gives the
-    // (+1, −2, +1) pattern with two box sums instead of three.
-    let dyy = b(x - (lobe - 1), y - half, wide, side)
-        - 3 * b(x - (lobe - 1), y - (lobe - 1) / 2, wide, lobe);
-    let dxx = b(x - half, y - (lobe - 1), side, wide)
-        - 3 * b(x - (lobe - 1) / 2, y - (lobe - 1), lobe, wide);
-    let dxy = b(x - lobe, y - lobe, lobe, lobe) + b(x + 1, y + 1, lobe, lobe)
-        - b(x + 1, y - lobe, lobe, lobe)
-        - b(x - lobe, y + 1, lobe, lobe);
-    BoxResponses { dxx, dyy, dxy }
+    let b = boxes(side).map(|(bx, by, bw, bh)| ii.box_sum_inside(x + bx, y + by, bw, bh));
+    combine(b)
+}
+
+/// Integral-image offsets of the 32 box corners of one filter side, for pixels whose every
+/// corner lies inside the image (no clipping): box sum = `I[A] − I[B] − I[C] + I[D]`.
+struct Kernel {
+    /// Per box: offsets of A (bottom-right), B (left of bottom-left), C (above top-right),
+    /// D (above-left of top-left), relative to the sample pixel's index.
+    corners: [[isize; 4]; 8],
+    /// Normalisation by the filter area and the slope LSB.
+    inv: f32,
+}
+
+impl Kernel {
+    fn new(side: usize, width: usize) -> Self {
+        let w = width as isize;
+        let at = |dx: isize, dy: isize| dy * w + dx;
+        let corners = boxes(side as isize).map(|(bx, by, bw, bh)| {
+            let (x0, y0, x1, y1) = (bx - 1, by - 1, bx + bw - 1, by + bh - 1);
+            [at(x1, y1), at(x0, y1), at(x1, y0), at(x0, y0)]
+        });
+        Self {
+            corners,
+            inv: 1.0 / ((side * side) as f32 * 512.0),
+        }
+    }
+
+    /// Determinant response at the pixel with integral index `idx` (same value as [`hessian`]).
+    #[inline(always)]
+    fn response(&self, data: &[u32], idx: usize) -> f32 {
+        let get = |off: isize| {
+            data.get((idx as isize + off) as usize)
+                .copied()
+                .unwrap_or(0)
+        };
+        let b = self.corners.map(|[a, b, c, d]| {
+            get(a)
+                .wrapping_sub(get(b))
+                .wrapping_sub(get(c))
+                .wrapping_add(get(d))
+        });
+        let r = combine(b);
+        let dxx = r.dxx as f32 * self.inv;
+        let dyy = r.dyy as f32 * self.inv;
+        let dxy = r.dxy as f32 * self.inv;
+        dxx * dyy - DXY_WEIGHT_SQ * dxy * dxy
+    }
+}
+
+/// Outputs per block of [`Kernel::row`] (stack: 8 × 32 × 4 B = 1 KiB).
+const ROW_BLOCK: usize = 32;
+
+impl Kernel {
+    /// Responses at `out.len()` consecutive grid positions of one row, `STEP` pixels apart,
+    /// starting at the pixel with integral index `idx0` (every corner inside the image). Each box
+    /// sum runs down four strided corner sequences at once, so the loads need no per-element
+    /// bounds checks; the arithmetic per position is exactly [`Kernel::response`]'s. Returns how
+    /// many leading positions were written (fewer only if a corner sequence would run past the
+    /// integral's end; the caller finishes those with [`Kernel::response`]).
+    fn row<const STEP: usize>(&self, data: &[u32], idx0: usize, out: &mut [f32]) -> usize {
+        let mut done = 0;
+        // Position-major: the eight box sums of one position are contiguous. Every entry a block
+        // reads is written first in that block.
+        let mut sums = [[0u32; 8]; ROW_BLOCK];
+        while done < out.len() {
+            let len = (out.len() - done).min(ROW_BLOCK);
+            let first = idx0 + done * STEP;
+            for (bi, corners) in self.corners.iter().enumerate() {
+                let seq = |off: isize| {
+                    let start = (first as isize + off) as usize;
+                    data.get(start..start + len * STEP)
+                        .map(|s| s.as_chunks::<STEP>().0)
+                };
+                let (Some(a), Some(b), Some(c), Some(d)) = (
+                    seq(corners[0]),
+                    seq(corners[1]),
+                    seq(corners[2]),
+                    seq(corners[3]),
+                ) else {
+                    return done;
+                };
+                for ((((o, a), b), c), d) in sums.iter_mut().zip(a).zip(b).zip(c).zip(d) {
+                    if let Some(slot) = o.get_mut(bi) {
+                        *slot = a[0]
+                            .wrapping_sub(b[0])
+                            .wrapping_sub(c[0])
+                            .wrapping_add(d[0]);
+                    }
+                }
+            }
+            let Some(dst) = out.get_mut(done..done + len) else {
+                return done;
+            };
+            for (o, b) in dst.iter_mut().zip(&sums) {
+                let r = combine(*b);
+                let dxx = r.dxx as f32 * self.inv;
+                let dyy = r.dyy as f32 * self.inv;
+                let dxy = r.dxy as f32 * self.inv;
+                *o = dxx * dyy - DXY_WEIGHT_SQ * dxy * dxy;
+            }
+            done += len;
+        }
+        done
+    }
+
+    /// [`Kernel::row`] for the octave's sampling step.
+    fn row_any(&self, step: usize, data: &[u32], idx0: usize, out: &mut [f32]) -> usize {
+        match step {
+            1 => self.row::<1>(data, idx0, out),
+            2 => self.row::<2>(data, idx0, out),
+            4 => self.row::<4>(data, idx0, out),
+            8 => self.row::<8>(data, idx0, out),
+            _ => 0,
+        }
+    }
 }
 
 /// Determinant response and Laplacian sign at `(x, y)` for a filter of `side` pixels.
@@ -185,7 +333,19 @@ fn hessian(ii: &Integral<'_>, x: isize, y: isize, side: isize) -> (f32, bool) {
     let dxx = r.dxx as f32 * inv;
     let dyy = r.dyy as f32 * inv;
     let dxy = r.dxy as f32 * inv;
-    (dxx * dyy - DXY_WEIGHT_SQ * dxy * dxy, r.dxx + r.dyy >= 0)
+    (
+        dxx * dyy - DXY_WEIGHT_SQ * dxy * dxy,
+        r.dxx as i64 + r.dyy as i64 >= 0,
+    )
+}
+
+/// Largest keypoint scale σ (pixels) that a maximum in `layer` of `octave` can refine to: the
+/// sub-scale step is at most half-way (in log side) towards the next layer. Slightly generous
+/// (0.1 %) so that `f32` rounding in [`refine`] can never exceed it.
+fn max_refined_sigma(octave: usize, layer: usize) -> f32 {
+    let s0 = filter_side(octave, layer) as f32;
+    let s1 = filter_side(octave, layer + 1) as f32;
+    SIGMA_PER_SIDE * libm::sqrtf(s0 * s1) * 1.001 + SIGMA_OFFSET_PX
 }
 
 /// Length of the response ring (in `f32`) the detector needs for a frame `width` pixels wide.
@@ -197,7 +357,8 @@ pub const fn ring_len(width: usize) -> usize {
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct DetectStats {
-    /// Strict 3×3×3 maxima above the threshold.
+    /// Strict 3×3×3 maxima above the threshold, in the layers that can reach `min_scale_px`
+    /// (layers that cannot are not searched at all).
     pub maxima: u32,
     /// Maxima refused because the filter footprint touched no-data pixels.
     pub rejected_nodata: u32,
@@ -224,9 +385,29 @@ pub(crate) fn detect(
         });
     }
     let has_nodata = img.pixels().iter().any(|p| !slope_is_valid(*p));
+    let nodata_map = if has_nodata {
+        NodataMap::build(img)
+    } else {
+        None
+    };
     let mut stats = DetectStats::default();
     let layers = cfg.layers as usize;
+    let data = ii.data();
     for octave in 0..cfg.octaves as usize {
+        // Layers whose maxima can reach `min_scale_px` ("live"), and the layers their 3×3×3
+        // neighbourhoods read. Maxima of the other layers would all be refused by the scale test,
+        // so their responses are never computed: same keypoints, less work (a 10 m frame against
+        // a 20 m tile skips the whole first octave).
+        let live = |layer: usize| {
+            layer >= 1
+                && layer + 1 < layers
+                && !(max_refined_sigma(octave, layer) < cfg.min_scale_px)
+        };
+        if !(1..layers.saturating_sub(1)).any(live) {
+            continue;
+        }
+        let needed =
+            |layer: usize| live(layer) || live(layer + 1) || (layer > 0 && live(layer - 1));
         let step = sample_step(octave);
         let (gw, gh) = (w.div_ceil(step), h.div_ceil(step));
         let idx =
@@ -234,18 +415,55 @@ pub(crate) fn detect(
         for gy in 0..gh {
             let y = gy * step;
             for layer in 0..layers {
+                if !needed(layer) {
+                    continue;
+                }
                 let side = filter_side(octave, layer);
                 let half = (side - 1) / 2;
-                for gx in 0..gw {
-                    let x = gx * step;
-                    let inside = x >= half && y >= half && x + half < w && y + half < h;
-                    let v = if inside {
-                        hessian(ii, x as isize, y as isize, side as isize).0
-                    } else {
-                        0.0
-                    };
-                    if let Some(slot) = ring.get_mut(idx(layer, gy, gx)) {
-                        *slot = v;
+                let kernel = Kernel::new(side, w);
+                let row_start = idx(layer, gy, 0);
+                let Some(row) = ring.get_mut(row_start..row_start + gw) else {
+                    continue;
+                };
+                let rows_inside = y >= half && y + half < h;
+                // Grid columns whose filter lies inside the image: x ≥ half, x + half < w.
+                let gx_lo = half.div_ceil(step).min(gw);
+                let gx_hi = if w > half {
+                    (w - half - 1) / step + 1
+                } else {
+                    0
+                }
+                .min(gw);
+                if !rows_inside || gx_lo >= gx_hi {
+                    row.fill(0.0);
+                    continue;
+                }
+                // Outside the filter's reach the response is 0.
+                if let Some(edge) = row.get_mut(..gx_lo) {
+                    edge.fill(0.0);
+                }
+                if let Some(edge) = row.get_mut(gx_hi..) {
+                    edge.fill(0.0);
+                }
+                // The first column may sit exactly on the filter's edge (x = half): its corners
+                // reach column −1, so it takes the clipping path.
+                let mut gx = gx_lo;
+                if gx * step == half || y == half {
+                    if y == half {
+                        for (g, slot) in row.iter_mut().enumerate().take(gx_hi).skip(gx_lo) {
+                            *slot = hessian(ii, (g * step) as isize, y as isize, side as isize).0;
+                        }
+                        continue;
+                    }
+                    if let Some(slot) = row.get_mut(gx) {
+                        *slot = hessian(ii, (gx * step) as isize, y as isize, side as isize).0;
+                    }
+                    gx += 1;
+                }
+                if let Some(seg) = row.get_mut(gx..gx_hi) {
+                    let done = kernel.row_any(step, data, y * w + gx * step, seg);
+                    for (k, slot) in seg.iter_mut().enumerate().skip(done) {
+                        *slot = kernel.response(data, y * w + (gx + k) * step);
                     }
                 }
             }
@@ -257,6 +475,9 @@ pub(crate) fn detect(
                 ring.get(idx(layer, gy, gx)).copied().unwrap_or(0.0)
             };
             for layer in 1..layers - 1 {
+                if !live(layer) {
+                    continue;
+                }
                 // The largest filter of the neighbourhood must fit one step beyond the centre.
                 let reach = (filter_side(octave, layer + 1) - 1) / 2 + step;
                 let y = cy * step;
@@ -273,7 +494,11 @@ pub(crate) fn detect(
                         continue;
                     }
                     stats.maxima += 1;
-                    if has_nodata && touches_nodata(img, x, y, reach) {
+                    let touches = match &nodata_map {
+                        Some(map) => map.touches(img, x, y, reach),
+                        None => has_nodata && touches_nodata(img, x, y, reach),
+                    };
+                    if touches {
                         stats.rejected_nodata += 1;
                         continue;
                     }
@@ -307,6 +532,78 @@ fn strict_max(
         }
     }
     true
+}
+
+/// Side of the blocks of [`NodataMap`], pixels.
+const NODATA_BLOCK: usize = 8;
+/// Blocks a [`NodataMap`] can hold (frames up to 724 × 724 pixels); larger frames use the plain
+/// scan.
+const NODATA_MAP_BLOCKS: usize = 8192;
+
+/// One bit per 8 × 8 block: whether the block holds any no-data pixel. Lets the no-data test of
+/// a maximum skip clean blocks and scan only the pixels of dirty ones (same answer as scanning
+/// the whole square).
+struct NodataMap {
+    bits: [u32; NODATA_MAP_BLOCKS / 32],
+    bw: usize,
+}
+
+impl NodataMap {
+    fn build(img: &SlopeImage<'_>) -> Option<Self> {
+        let (w, h) = (img.width(), img.height());
+        let (bw, bh) = (w.div_ceil(NODATA_BLOCK), h.div_ceil(NODATA_BLOCK));
+        if bw * bh > NODATA_MAP_BLOCKS {
+            return None;
+        }
+        let mut map = Self {
+            bits: [0; NODATA_MAP_BLOCKS / 32],
+            bw,
+        };
+        for (row, px) in img.pixels().chunks_exact(w).enumerate() {
+            for (col, p) in px.iter().enumerate() {
+                if !slope_is_valid(*p) {
+                    let b = (row / NODATA_BLOCK) * bw + col / NODATA_BLOCK;
+                    if let Some(word) = map.bits.get_mut(b / 32) {
+                        *word |= 1 << (b % 32);
+                    }
+                }
+            }
+        }
+        Some(map)
+    }
+
+    fn dirty(&self, bx: usize, by: usize) -> bool {
+        let b = by * self.bw + bx;
+        self.bits
+            .get(b / 32)
+            .is_some_and(|w| w & (1 << (b % 32)) != 0)
+    }
+
+    /// [`touches_nodata`] through the block map.
+    fn touches(&self, img: &SlopeImage<'_>, x: usize, y: usize, reach: usize) -> bool {
+        let w = img.width();
+        let px = img.pixels();
+        let (x0, x1, y0, y1) = (x - reach, x + reach, y - reach, y + reach);
+        for by in y0 / NODATA_BLOCK..=y1 / NODATA_BLOCK {
+            for bx in x0 / NODATA_BLOCK..=x1 / NODATA_BLOCK {
+                if !self.dirty(bx, by) {
+                    continue;
+                }
+                let cx0 = x0.max(bx * NODATA_BLOCK);
+                let cx1 = x1.min(bx * NODATA_BLOCK + NODATA_BLOCK - 1);
+                let cy0 = y0.max(by * NODATA_BLOCK);
+                let cy1 = y1.min(by * NODATA_BLOCK + NODATA_BLOCK - 1);
+                for row in cy0..=cy1 {
+                    if let Some(run) = px.get(row * w + cx0..=row * w + cx1)
+                        && run.iter().any(|p| !slope_is_valid(*p))
+                    {
+                        return true;
+                    }
+                }
+            }
+        }
+        false
+    }
 }
 
 /// Whether any pixel within `reach` of `(x, y)` (a square) is no data.

@@ -178,6 +178,10 @@ impl<'a> DemPatch<'a> {
     pub fn pixel_m(&self) -> f32 {
         self.pixel_m
     }
+    /// The nodata value set by [`Self::with_nodata`], metres.
+    pub fn nodata_m(&self) -> Option<f32> {
+        self.nodata_m
+    }
     /// The raw height buffer (metres), row-major.
     pub fn heights_m(&self) -> &'a [f32] {
         self.heights_m

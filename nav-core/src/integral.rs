@@ -35,27 +35,45 @@ impl<'a> Integral<'a> {
             capacity,
         })?;
         let px = img.pixels();
+        // Row by row: running row sum plus the integral row above (same wrapping additions in
+        // the same order as the per-pixel definition).
+        let mut above_start: Option<usize> = None;
         for row in 0..h {
+            let start = row * w;
+            let (done, rest) = out.split_at_mut(start);
+            let above = above_start.and_then(|a| done.get(a..a + w));
+            let (Some(dst), Some(src)) = (rest.get_mut(..w), px.get(start..start + w)) else {
+                break;
+            };
             let mut run = 0u32;
-            for col in 0..w {
-                let i = row * w + col;
-                let raw = px.get(i).map_or(0, |p| p.to_bits());
-                run = run.wrapping_add(if raw <= SLOPE_MAX_RAW { raw as u32 } else { 0 });
-                let above = if row > 0 {
-                    out.get(i - w).copied().unwrap_or(0)
-                } else {
-                    0
-                };
-                if let Some(o) = out.get_mut(i) {
-                    *o = above.wrapping_add(run);
+            match above {
+                Some(above) => {
+                    for ((o, p), a) in dst.iter_mut().zip(src).zip(above) {
+                        let raw = p.to_bits();
+                        run = run.wrapping_add(if raw <= SLOPE_MAX_RAW { raw as u32 } else { 0 });
+                        *o = a.wrapping_add(run);
+                    }
+                }
+                None => {
+                    for (o, p) in dst.iter_mut().zip(src) {
+                        let raw = p.to_bits();
+                        run = run.wrapping_add(if raw <= SLOPE_MAX_RAW { raw as u32 } else { 0 });
+                        *o = run;
+                    }
                 }
             }
+            above_start = Some(start);
         }
         Ok(Self {
             data: out,
             width: w,
             height: h,
         })
+    }
+
+    /// The entries, row-major (`width × height`).
+    pub(crate) fn data(&self) -> &'a [u32] {
+        self.data
     }
 
     /// Width in pixels.

@@ -68,13 +68,15 @@ pub fn ssd_to_tile(a: &[f32; DESCRIPTOR_LEN], tile: &Tile<'_>, j: usize, bound: 
 
 #[inline]
 fn ssd_bounded(a: &[f32; DESCRIPTOR_LEN], tile: &Tile<'_>, j: usize, bound: f32) -> f32 {
-    let b = tile.descriptor_bytes(j);
+    let (b, _) = tile.descriptor_bytes(j).as_chunks::<4>();
     let mut acc = 0.0f32;
-    // Check the bound every 16 components: early exit without changing the order of additions.
-    for (av, bb) in a.chunks_exact(16).zip(b.chunks_exact(64)) {
-        for (x, yb) in av.iter().zip(bb.chunks_exact(4)) {
-            let y = yb.try_into().map_or(f32::NAN, f32::from_le_bytes);
-            let d = x - y;
+    // Check the bound every 8 components: early exit without changing the order of additions.
+    // The running sum never decreases, so exiting at any granularity returns some value above
+    // `bound` exactly when the full sum would be above it; callers only compare the result with
+    // `bound` or smaller values, so the granularity changes no decision.
+    for (av, bb) in a.chunks_exact(8).zip(b.chunks_exact(8)) {
+        for (x, yb) in av.iter().zip(bb) {
+            let d = x - f32::from_le_bytes(*yb);
             acc += d * d;
         }
         if acc > bound {
@@ -102,7 +104,7 @@ pub fn match_features<const M: usize>(
         let lap = f.keypoint.laplacian_positive;
         let (mut best, mut best_j, mut second) = (f32::INFINITY, usize::MAX, f32::INFINITY);
         for j in 0..n_tile {
-            if tile.keypoint(j).laplacian_positive != lap || !use_tile(j) {
+            if tile.laplacian_positive(j) != lap || !use_tile(j) {
                 continue;
             }
             stats.comparisons += 1;
@@ -155,7 +157,7 @@ pub fn match_features<const M: usize>(
 
 /// Whether frame feature `i` is tile feature `j`'s best frame match (ties go to the lower index).
 fn is_mutual(frame: &[Feature], i: usize, tile: &Tile<'_>, j: usize, ssd_ij: f32) -> bool {
-    let lap = tile.keypoint(j).laplacian_positive;
+    let lap = tile.laplacian_positive(j);
     for (k, f) in frame.iter().enumerate() {
         if k == i || f.keypoint.laplacian_positive != lap {
             continue;

@@ -336,9 +336,14 @@ impl<'t> Navigator<'t> {
             let expect_scale = f.keypoint.scale_px * scale;
             let mut best: Option<(f32, usize)> = None;
             for j in 0..tile.len().min(u16::MAX as usize) {
+                // Position first (most tile features are far away), the full record after.
+                let (kx, ky) = tile.position_px(j);
+                let (dx, dy) = (kx - px, ky - py);
+                if dx * dx + dy * dy > r2 {
+                    continue;
+                }
                 let k = tile.keypoint(j);
-                let (dx, dy) = (k.x_px - px, k.y_px - py);
-                if dx * dx + dy * dy > r2 || k.laplacian_positive != f.keypoint.laplacian_positive {
+                if k.laplacian_positive != f.keypoint.laplacian_positive {
                     continue;
                 }
                 let ratio = k.scale_px / expect_scale;
@@ -402,8 +407,8 @@ impl<'t> Navigator<'t> {
         let use_tile = |j: usize| match footprint {
             None => true,
             Some(([cx, cy], r2)) => {
-                let k = tile.keypoint(j);
-                let (dx, dy) = (k.x_px - cx, k.y_px - cy);
+                let (kx, ky) = tile.position_px(j);
+                let (dx, dy) = (kx - cx, ky - cy);
                 dx * dx + dy * dy <= r2
             }
         };

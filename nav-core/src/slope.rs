@@ -69,26 +69,117 @@ pub fn slope_into_binned<'b>(
     if w == 0 || h == 0 {
         return Err(FrameError::Empty);
     }
+    if w > BIN_ROW_CAP {
+        return Err(FrameError::TooLarge {
+            needed: w,
+            capacity: BIN_ROW_CAP,
+        });
+    }
+    let n = w * h;
+    let capacity = out.len();
+    let out = out.get_mut(..n).ok_or(FrameError::TooLarge {
+        needed: n,
+        capacity,
+    })?;
+    let pixel_m = dem.pixel_m() * k as f32;
+    let inv8 = 1.0 / (8.0 * pixel_m);
     let half = (k * k).div_ceil(2);
-    let block = |c: usize, r: usize| {
-        let (mut sum, mut n) = (0.0f32, 0usize);
-        for j in 0..k {
-            for i in 0..k {
-                if let Some(z) = dem.height_at(c * k + i, r * k + j) {
-                    sum += z;
-                    n += 1;
+    // Streaming over coarse rows: each block mean is computed once into a 5-row ring, filled
+    // heights into a 3-row ring, and slope is written one row behind (48 KiB of stack at most).
+    let mut raw = [[f32::NAN; BIN_ROW_CAP]; 5];
+    let mut fil = [[f32::NAN; BIN_ROW_CAP]; 3];
+    let get = |rows: &[[f32; BIN_ROW_CAP]], ring: usize, r: isize, c: isize| -> f32 {
+        if r < 0 || c < 0 || r as usize >= h || c as usize >= w {
+            return f32::NAN;
+        }
+        rows.get(r as usize % ring)
+            .and_then(|row| row.get(c as usize))
+            .copied()
+            .unwrap_or(f32::NAN)
+    };
+    for r_in in 0..h + 2 {
+        if r_in < h
+            && let Some(row) = raw.get_mut(r_in % 5)
+        {
+            for (c, slot) in row.iter_mut().take(w).enumerate() {
+                let (mut sum, mut cnt) = (0.0f32, 0usize);
+                for j in 0..k {
+                    for i in 0..k {
+                        if let Some(z) = dem.height_at(c * k + i, r_in * k + j) {
+                            sum += z;
+                            cnt += 1;
+                        }
+                    }
                 }
+                *slot = if cnt >= half {
+                    sum / cnt as f32
+                } else {
+                    f32::NAN
+                };
             }
         }
-        (n >= half).then(|| sum / n as f32)
-    };
-    let pixel_m = dem.pixel_m() * k as f32;
-    if fill_isolated {
-        slope_grid(w, h, pixel_m, |c, r| filled(&block, w, h, c, r), out)
-    } else {
-        slope_grid(w, h, pixel_m, block, out)
+        // Filled row F = r_in − 1 needs raw rows F − 1 ..= F + 1.
+        let f = r_in as isize - 1;
+        if f >= 0 && (f as usize) < h {
+            let mut row = [f32::NAN; BIN_ROW_CAP];
+            for (c, slot) in row.iter_mut().take(w).enumerate() {
+                let ci = c as isize;
+                let v = get(&raw, 5, f, ci);
+                *slot = if !v.is_nan() || !fill_isolated {
+                    v
+                } else {
+                    let (mut sum, mut cnt) = (0.0f32, 0usize);
+                    for dr in -1..=1isize {
+                        for dc in -1..=1isize {
+                            let z = get(&raw, 5, f + dr, ci + dc);
+                            if (dr, dc) != (0, 0) && !z.is_nan() {
+                                sum += z;
+                                cnt += 1;
+                            }
+                        }
+                    }
+                    if cnt >= FILL_MIN_NEIGHBOURS {
+                        sum / cnt as f32
+                    } else {
+                        f32::NAN
+                    }
+                };
+            }
+            if let Some(dst) = fil.get_mut(f as usize % 3) {
+                *dst = row;
+            }
+        }
+        // Slope row S = r_in − 2 needs filled rows S − 1 ..= S + 1.
+        let srow = r_in as isize - 2;
+        if srow < 0 || srow as usize >= h {
+            continue;
+        }
+        let sr = srow as usize;
+        for c in 0..w {
+            let v = if sr == 0 || c == 0 || sr + 1 >= h || c + 1 >= w {
+                SLOPE_NODATA
+            } else {
+                let z = |dc: usize, dr: usize| {
+                    let v = get(
+                        &fil,
+                        3,
+                        srow + dr as isize - 1,
+                        c as isize + dc as isize - 1,
+                    );
+                    (!v.is_nan()).then_some(v)
+                };
+                horn(&z, 1, 1, inv8).map_or(SLOPE_NODATA, slope_from_deg)
+            };
+            if let Some(o) = out.get_mut(sr * w + c) {
+                *o = v;
+            }
+        }
     }
+    SlopeImage::new_checked(out, w, h, pixel_m)
 }
+
+/// Widest binned frame (in binned pixels) [`slope_into_binned`] streams through its row rings.
+pub const BIN_ROW_CAP: usize = 1024;
 
 /// Horn's slope over a `w × h` grid of heights given by `z(col, row)` (`None` = no data).
 fn slope_grid<'b>(

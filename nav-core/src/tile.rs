@@ -319,6 +319,22 @@ impl<'a> Tile<'a> {
         }
     }
 
+    /// Position `(x_px, y_px)` of keypoint `i` in tile pixels (NaN out of range). Cheaper than
+    /// [`Self::keypoint`] for position gates.
+    #[inline]
+    pub fn position_px(&self, i: usize) -> (f32, f32) {
+        let at = i * KEYPOINT_RECORD_LEN;
+        (rd_f32(self.keypoints, at), rd_f32(self.keypoints, at + 4))
+    }
+
+    /// Laplacian sign of keypoint `i` (the flags word only; `false` out of range). Cheaper than
+    /// [`Self::keypoint`] for the matcher's sign gate.
+    #[inline]
+    pub fn laplacian_positive(&self, i: usize) -> bool {
+        rd_u32(self.keypoints, i * KEYPOINT_RECORD_LEN + 20).unwrap_or(0) & FLAG_LAPLACIAN_POSITIVE
+            != 0
+    }
+
     /// Component `j` of descriptor `i` (NaN out of range, which `parse` rules out for valid
     /// indices).
     #[inline]

@@ -1,0 +1,180 @@
+//! # Umbra HIL firmware
+//!
+//! nav-core on a Cortex-M (QEMU `mps2-an386` Cortex-M4 or `mps2-an500` Cortex-M7), the
+//! reference tile linked into flash, frames received over the hil-bridge link, a fix (or typed
+//! no-fix) and the frame's cost sent back.
+//!
+//! * Link: semihosting FIFOs `hil-link.rx` / `hil-link.tx` in QEMU's working directory (fast);
+//!   the protocol state machine ([`hil_bridge::target::TargetLink`]) only sees `embedded_io`
+//!   traits, so a UART driver is a drop-in replacement.
+//! * Cost: the navigator call sits between [`hil_frame_begin`] and [`hil_frame_end`]; the host's
+//!   TCG plugin counts the instructions between them; SysTick gives the target's own view.
+//! * Failure: a panic or a fault ends QEMU through semihosting with exit code 1, never a hang.
+#![no_std]
+#![no_main]
+
+#[cfg(feature = "defmt")]
+mod log;
+mod semihosting;
+mod stack;
+mod timer;
+#[cfg(feature = "uart-link")]
+mod uart;
+
+/// `defmt::info!` with the `defmt` feature, nothing without it.
+macro_rules! info {
+    ($($t:tt)*) => {
+        #[cfg(feature = "defmt")]
+        defmt::info!($($t)*);
+    };
+}
+
+use core::hint::black_box;
+use cortex_m_rt::{ExceptionFrame, entry, exception};
+use cortex_m_semihosting::debug::{self, EXIT_FAILURE, EXIT_SUCCESS};
+use cortex_m_semihosting::hprintln;
+use hil_bridge::convert;
+use hil_bridge::flight::{MAX_FRAME_PX, MAX_FRAME_WIDTH, Workspace};
+use hil_bridge::msg::{FrameCost, Message};
+use hil_bridge::target::{Event, TargetInfo, TargetLink};
+use nav_core::{DemPatch, NavConfig, NavError, Navigator, Tile};
+#[cfg(not(feature = "uart-link"))]
+use semihosting::HostFile;
+use timer::{CycleCounter, SysTickCounter};
+
+/// Core clock the SysTick count refers to, Hz (the MPS2 FPGA images run at 25 MHz).
+pub const CORE_HZ: u32 = 25_000_000;
+
+/// The reference tile, 4-byte aligned in flash (its records are 4-byte aligned inside).
+#[repr(C, align(4))]
+struct Aligned<T: ?Sized>(T);
+static TILE: &Aligned<[u8]> = &Aligned(*include_bytes!(concat!(env!("OUT_DIR"), "/tile.bin")));
+
+/// Wire-format version stamped into the binary (find it with `strings`).
+#[used]
+static VERSION_STAMP: [u8; 24] = *b"UMBRA-HIL-PROTOCOL-v1\0\0\0";
+
+/// Start of a measured window (the instruction counter's begin marker). Its body differs from
+/// [`hil_frame_end`] so the linker cannot merge the two.
+#[inline(never)]
+pub fn hil_frame_begin(window: u32) {
+    black_box(window);
+}
+
+/// End of a measured window (the instruction counter's end marker).
+#[inline(never)]
+pub fn hil_frame_end(window: u32) {
+    black_box(window ^ 0x5EED_F00D);
+}
+
+fn fail(what: &str) -> ! {
+    hprintln!("umbra-hil-firmware: {}", what);
+    loop {
+        debug::exit(EXIT_FAILURE);
+    }
+}
+
+#[entry]
+fn main() -> ! {
+    // cortex-m-rt turns these into `&'static mut` references (initialised at compile time, in
+    // .bss/.data, no copy through the stack).
+    static mut HEIGHTS: [f32; MAX_FRAME_PX] = [0.0; MAX_FRAME_PX];
+    static mut WORKSPACE: Workspace = Workspace::new();
+
+    stack::paint();
+    if cfg!(feature = "selftest-panic") {
+        panic!("selftest-panic: the panic handler must end QEMU with exit code 1");
+    }
+    let Some(core) = cortex_m::Peripherals::take() else {
+        fail("core peripherals taken twice");
+    };
+    let mut clock = SysTickCounter::new(core.SYST, CORE_HZ);
+    let tile = match Tile::parse(&TILE.0) {
+        Ok(t) => t,
+        Err(_) => fail("the linked reference tile does not parse"),
+    };
+    let nav = Navigator::new(tile, NavConfig::default());
+    #[cfg(not(feature = "uart-link"))]
+    let (Ok(mut rx), Ok(mut tx)) = (HostFile::link_rx(), HostFile::link_tx()) else {
+        fail("cannot open hil-link.rx / hil-link.tx in QEMU's working directory");
+    };
+    #[cfg(feature = "uart-link")]
+    let (mut rx, mut tx) = (uart::Uart::uart0(), uart::Uart::uart0());
+    info!("umbra-hil-firmware: tile of {=usize} features", tile.len());
+    let stored_crc = TILE
+        .0
+        .len()
+        .checked_sub(4)
+        .and_then(|at| TILE.0.get(at..))
+        .and_then(|b| b.try_into().ok())
+        .map_or(0, u32::from_le_bytes);
+    let info = TargetInfo {
+        tile_crc: stored_crc,
+        tile_features: tile.len() as u32,
+        max_frame_width: MAX_FRAME_WIDTH as u16,
+    };
+    let mut link = TargetLink::new(info, HEIGHTS);
+    let ws = WORKSPACE;
+    let mut window = 0u32;
+    loop {
+        match link.poll(&mut rx, &mut tx) {
+            Ok(Event::Frame(f)) => {
+                let h = f.header;
+                let prior = h.prior.as_ref().map(convert::prior);
+                let t0 = clock.now();
+                hil_frame_begin(window);
+                let result = match DemPatch::new_checked(
+                    link.heights_m(),
+                    h.width as usize,
+                    h.height as usize,
+                    h.pixel_m,
+                ) {
+                    Ok(dem) => nav.locate_dem(ws, &dem, prior.as_ref()),
+                    Err(e) => Err(NavError::Frame(e)),
+                };
+                hil_frame_end(window);
+                let cycles = clock.now().wrapping_sub(t0);
+                let cost = FrameCost {
+                    frame_id: h.frame_id,
+                    window,
+                    timer_cycles: cycles,
+                    core_hz: clock.hz(),
+                    stack_peak_bytes: stack::peak_bytes(),
+                };
+                info!(
+                    "frame {=u32}: {=u32} cycles, stack {=u32} B",
+                    h.frame_id, cycles, cost.stack_peak_bytes
+                );
+                window = window.wrapping_add(1);
+                let res = convert::frame_result(h.frame_id, &result);
+                if link.send(&mut tx, &Message::FrameCost(cost)).is_err()
+                    || link.send(&mut tx, &Message::FrameResult(res)).is_err()
+                {
+                    fail("link write failed");
+                }
+            }
+            Ok(Event::Shutdown) | Ok(Event::EndOfStream) => loop {
+                debug::exit(EXIT_SUCCESS);
+            },
+            Err(_) => fail("link failed"),
+        }
+    }
+}
+
+#[panic_handler]
+fn panic(info: &core::panic::PanicInfo) -> ! {
+    hprintln!("umbra-hil-firmware panicked: {}", info);
+    loop {
+        debug::exit(EXIT_FAILURE);
+    }
+}
+
+// cortex-m-rt requires the HardFault handler to be declared `unsafe fn`; it only reports.
+#[allow(unsafe_code)]
+#[exception]
+unsafe fn HardFault(ef: &ExceptionFrame) -> ! {
+    hprintln!("umbra-hil-firmware: hard fault at pc {:#010x}", ef.pc());
+    loop {
+        debug::exit(EXIT_FAILURE);
+    }
+}

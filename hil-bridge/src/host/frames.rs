@@ -1,0 +1,382 @@
+//! The recorded frame set: a reference tile and DEM frames with known poses, generated from the
+//! built-in synthetic terrain, plus a stress set for the timing bound. Written to a directory so
+//! that the firmware build can link the tile and any run can replay the same frames; regenerate
+//! with `hil-bridge gen`. The link protocol does not care where frames come from: a closed-loop
+//! simulator can stream its own.
+//!
+//! Geometry: the terrain is a 10 m DEM; the tile is its 2 × 2 block mean at 20 m, so tile pixel
+//! `X` covers DEM pixels `2X, 2X + 1` and its centre is DEM coordinate `2X + 0.5`. A frame of
+//! `200 × 200` pixels at 10 m is sampled bilinearly from the DEM around a centre with a heading:
+//! frame `(col, row)` sits at DEM `c + R(heading)·((col, row) − 99.5)`.
+
+use anyhow::{Context, Result, bail};
+use ground_sim::terrain::{Preset, TerrainParams, Window, generate};
+use ground_sim::tile::{GeoGrid, MAX_TILE_FEATURES, build_tile};
+use nav_core::{SLOPE_NODATA, SlopeImage, SurfConfig};
+use serde::{Deserialize, Serialize};
+use std::fs;
+use std::path::Path;
+
+/// Frame side, pixels.
+pub const FRAME_SIDE: usize = 200;
+/// Frame ground sample distance, metres.
+pub const FRAME_PIXEL_M: f32 = 10.0;
+/// Terrain side, pixels at 10 m.
+pub const TERRAIN_SIDE: usize = 600;
+/// Tile ground sample distance, metres.
+pub const TILE_PIXEL_M: f64 = 20.0;
+/// Format version of `frames.bin` (bumped on any change of its layout).
+pub const FRAMES_FORMAT_VERSION: u32 = 1;
+/// Terrain seed.
+pub const TERRAIN_SEED: u64 = 8;
+
+/// What a frame shows.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FrameKind {
+    /// Terrain at a known pose (should give a fix).
+    Terrain,
+    /// Terrain with a prior (predicted pose) sent along.
+    TerrainWithPrior,
+    /// Terrain with no-data holes.
+    TerrainHoles,
+    /// All heights equal: no features.
+    Flat,
+    /// Uniform random heights: many weak, unmatchable keypoints.
+    Noise,
+    /// 8-pixel squares of alternating height.
+    Checkerboard,
+    /// Sum of sinusoids at several wavelengths and directions.
+    Textured,
+    /// Dense random blobs at the detector's matchable scales: the keypoint budget overflows.
+    MaxKeypoints,
+}
+
+/// Ground truth of a terrain frame.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Truth {
+    /// Frame centre, tile pixels `[x, y]`.
+    pub center_tile_px: [f64; 2],
+    /// Heading (frame +x in tile axes), radians.
+    pub heading_rad: f64,
+    /// Tile pixels per frame pixel.
+    pub scale: f64,
+}
+
+/// One frame's description (the heights live in `frames.bin`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FrameMeta {
+    /// Frame id on the link.
+    pub id: u32,
+    /// Short name.
+    pub name: String,
+    /// Kind.
+    pub kind: FrameKind,
+    /// Width, pixels.
+    pub width: u16,
+    /// Height, pixels.
+    pub height: u16,
+    /// Ground sample distance, metres.
+    pub pixel_m: f32,
+    /// Truth for terrain frames.
+    pub truth: Option<Truth>,
+    /// Prior sent with the frame.
+    pub prior: Option<crate::msg::WirePrior>,
+}
+
+/// A frame: description and heights (metres, row-major).
+#[derive(Debug, Clone)]
+pub struct Frame {
+    /// Description.
+    pub meta: FrameMeta,
+    /// Heights, metres.
+    pub heights_m: Vec<f32>,
+}
+
+/// The whole recorded set.
+#[derive(Debug, Clone)]
+pub struct FrameSet {
+    /// Reference tile blob (linked into the firmware).
+    pub tile: Vec<u8>,
+    /// Frames in link order.
+    pub frames: Vec<Frame>,
+}
+
+/// Deterministic xorshift-multiply generator for the stress frames.
+struct Rng(u64);
+impl Rng {
+    fn next(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+    fn unit(&mut self) -> f64 {
+        (self.next() >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
+fn bilinear(z: &[f32], n: usize, u: f64, v: f64) -> f32 {
+    let u = u.clamp(0.0, (n - 1) as f64);
+    let v = v.clamp(0.0, (n - 1) as f64);
+    let (x0, y0) = (
+        (u.floor() as usize).min(n - 2),
+        (v.floor() as usize).min(n - 2),
+    );
+    let (fx, fy) = (u - x0 as f64, v - y0 as f64);
+    let at = |x: usize, y: usize| z[y * n + x] as f64;
+    let top = at(x0, y0) * (1.0 - fx) + at(x0 + 1, y0) * fx;
+    let bot = at(x0, y0 + 1) * (1.0 - fx) + at(x0 + 1, y0 + 1) * fx;
+    (top * (1.0 - fy) + bot * fy) as f32
+}
+
+/// Cut a frame from the 10 m DEM at centre `(cu, cv)` (DEM pixels) and `heading_rad`.
+fn cut(dem: &[f32], cu: f64, cv: f64, heading_rad: f64) -> Vec<f32> {
+    let (s, c) = heading_rad.sin_cos();
+    let half = (FRAME_SIDE as f64 - 1.0) / 2.0;
+    let mut out = Vec::with_capacity(FRAME_SIDE * FRAME_SIDE);
+    for row in 0..FRAME_SIDE {
+        for col in 0..FRAME_SIDE {
+            let (x, y) = (col as f64 - half, row as f64 - half);
+            out.push(bilinear(
+                dem,
+                TERRAIN_SIDE,
+                cu + c * x - s * y,
+                cv + s * x + c * y,
+            ));
+        }
+    }
+    out
+}
+
+fn stress(kind: FrameKind, seed: u64) -> Vec<f32> {
+    let n = FRAME_SIDE;
+    let mut rng = Rng(seed);
+    let mut z = vec![0.0f32; n * n];
+    match kind {
+        FrameKind::Flat => z.fill(-1234.5),
+        FrameKind::Noise => z.iter_mut().for_each(|v| *v = (rng.unit() * 40.0) as f32),
+        FrameKind::Checkerboard => {
+            for (i, v) in z.iter_mut().enumerate() {
+                let (x, y) = (i % n / 8, i / n / 8);
+                *v = if (x + y) % 2 == 0 { 0.0 } else { 25.0 };
+            }
+        }
+        FrameKind::Textured => {
+            let waves: Vec<(f64, f64, f64, f64)> = (0..12)
+                .map(|k| {
+                    let wl = 6.0 * 1.35f64.powi(k);
+                    let dir = rng.unit() * std::f64::consts::TAU;
+                    let kk = std::f64::consts::TAU / wl;
+                    (kk * dir.cos(), kk * dir.sin(), rng.unit() * 6.3, 0.4 * wl)
+                })
+                .collect();
+            for (i, v) in z.iter_mut().enumerate() {
+                let (x, y) = ((i % n) as f64, (i / n) as f64);
+                *v = waves
+                    .iter()
+                    .map(|(kx, ky, ph, a)| a * (kx * x + ky * y + ph).sin())
+                    .sum::<f64>() as f32;
+            }
+        }
+        FrameKind::MaxKeypoints => {
+            // Gaussian pits and bumps, σ 3–9 px, every ~9 px: far more blobs than the budget.
+            for _ in 0..700 {
+                let (cx, cy) = (rng.unit() * n as f64, rng.unit() * n as f64);
+                let sigma = 3.0 + 6.0 * rng.unit();
+                let amp = (rng.unit() - 0.5) * 60.0;
+                let r = (3.0 * sigma).ceil() as isize;
+                for dy in -r..=r {
+                    for dx in -r..=r {
+                        let (x, y) = (cx as isize + dx, cy as isize + dy);
+                        if x < 0 || y < 0 || x >= n as isize || y >= n as isize {
+                            continue;
+                        }
+                        let (fx, fy) = (x as f64 - cx, y as f64 - cy);
+                        let g = (-(fx * fx + fy * fy) / (2.0 * sigma * sigma)).exp();
+                        z[y as usize * n + x as usize] += (amp * g) as f32;
+                    }
+                }
+            }
+        }
+        _ => {}
+    }
+    z
+}
+
+/// Generate the set: `terrain_frames` terrain frames (headings 0–345°, every sixth with a prior,
+/// one with holes) followed by the five stress frames.
+pub fn generate_set(terrain_frames: usize) -> Result<FrameSet> {
+    let params = TerrainParams {
+        preset: Preset::Shoemaker,
+        window: Window::Floor,
+        seed: TERRAIN_SEED,
+        size_m: TERRAIN_SIDE as f64 * FRAME_PIXEL_M as f64,
+        pixel_m: FRAME_PIXEL_M as f64,
+    };
+    let (dem, _) = generate(&params, &indicatif::ProgressBar::hidden())
+        .map_err(|e| anyhow::anyhow!("terrain: {e}"))?;
+    if dem.width() != TERRAIN_SIDE || dem.height() != TERRAIN_SIDE {
+        bail!("terrain is {}x{}", dem.width(), dem.height());
+    }
+    let z = dem.heights_m();
+    // 20 m reference: 2 × 2 block means, then nav-core's own slope and SURF.
+    let t = TERRAIN_SIDE / 2;
+    let mut coarse = vec![0.0f32; t * t];
+    for r in 0..t {
+        for c in 0..t {
+            let at = |x: usize, y: usize| z[y * TERRAIN_SIDE + x];
+            coarse[r * t + c] = 0.25
+                * (at(2 * c, 2 * r)
+                    + at(2 * c + 1, 2 * r)
+                    + at(2 * c, 2 * r + 1)
+                    + at(2 * c + 1, 2 * r + 1));
+        }
+    }
+    let patch = nav_core::DemPatch::new_checked(&coarse, t, t, TILE_PIXEL_M as f32)?;
+    let mut slope = vec![SLOPE_NODATA; t * t];
+    let img: SlopeImage<'_> = nav_core::slope::slope_into(&patch, &mut slope)?;
+    let grid = GeoGrid {
+        origin_x_m: -0.5 * (TERRAIN_SIDE as f64 * FRAME_PIXEL_M as f64) + 0.5 * TILE_PIXEL_M,
+        origin_y_m: 0.5 * (TERRAIN_SIDE as f64 * FRAME_PIXEL_M as f64) - 0.5 * TILE_PIXEL_M,
+        pixel_x_m: TILE_PIXEL_M,
+        pixel_y_m: -TILE_PIXEL_M,
+        projection: "local metric grid, Shoemaker floor synthetic scene (hil-bridge)".into(),
+    };
+    let tile = build_tile(&img, &grid, &SurfConfig::default(), MAX_TILE_FEATURES)
+        .context("reference tile")?;
+
+    let mut frames = Vec::new();
+    let mut rng = Rng(0xF2A3E5);
+    let margin = 150.0;
+    for k in 0..terrain_frames {
+        let heading = (k as f64 * 45.0 + 15.0 * (k / 8) as f64)
+            .rem_euclid(360.0)
+            .to_radians();
+        let cu = margin + rng.unit() * (TERRAIN_SIDE as f64 - 2.0 * margin);
+        let cv = margin + rng.unit() * (TERRAIN_SIDE as f64 - 2.0 * margin);
+        let mut heights = cut(z, cu, cv, heading);
+        let truth = Truth {
+            center_tile_px: [(cu - 0.5) / 2.0, (cv - 0.5) / 2.0],
+            heading_rad: heading,
+            scale: FRAME_PIXEL_M as f64 / TILE_PIXEL_M,
+        };
+        let kind = if k % 6 == 5 {
+            FrameKind::TerrainWithPrior
+        } else if k % 6 == 3 {
+            FrameKind::TerrainHoles
+        } else {
+            FrameKind::Terrain
+        };
+        if kind == FrameKind::TerrainHoles {
+            for (i, h) in heights.iter_mut().enumerate() {
+                let (x, y) = ((i % FRAME_SIDE) as i64, (i / FRAME_SIDE) as i64);
+                if (x - 60).pow(2) + (y - 140).pow(2) < 400 || (20..40).contains(&x) {
+                    *h = f32::NAN;
+                }
+            }
+        }
+        let prior = (kind == FrameKind::TerrainWithPrior).then(|| crate::msg::WirePrior {
+            center_tile_px: [
+                truth.center_tile_px[0] as f32 + 4.0,
+                truth.center_tile_px[1] as f32 - 3.0,
+            ],
+            sigma_px: 8.0,
+            heading_rad: heading as f32 + 0.05,
+            heading_sigma_rad: 0.1,
+            scale: 0.5,
+            scale_sigma: 0.02,
+        });
+        frames.push(Frame {
+            meta: FrameMeta {
+                id: frames.len() as u32,
+                name: format!(
+                    "terrain-{k:02}-{:03}deg",
+                    heading.to_degrees().round() as i64
+                ),
+                kind,
+                width: FRAME_SIDE as u16,
+                height: FRAME_SIDE as u16,
+                pixel_m: FRAME_PIXEL_M,
+                truth: Some(truth),
+                prior,
+            },
+            heights_m: heights,
+        });
+    }
+    for (i, kind) in [
+        FrameKind::MaxKeypoints,
+        FrameKind::Noise,
+        FrameKind::Textured,
+        FrameKind::Checkerboard,
+        FrameKind::Flat,
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        frames.push(Frame {
+            meta: FrameMeta {
+                id: frames.len() as u32,
+                name: format!("stress-{}", serde_json::to_string(&kind)?.trim_matches('"')),
+                kind,
+                width: FRAME_SIDE as u16,
+                height: FRAME_SIDE as u16,
+                pixel_m: FRAME_PIXEL_M,
+                truth: None,
+                prior: None,
+            },
+            heights_m: stress(kind, 77 + i as u64),
+        });
+    }
+    Ok(FrameSet { tile, frames })
+}
+
+impl FrameSet {
+    /// Write `tile.bin`, `frames.bin` (heights, `f32` LE, frame after frame) and `frames.json`.
+    pub fn write(&self, dir: &Path) -> Result<()> {
+        fs::create_dir_all(dir)?;
+        fs::write(dir.join("tile.bin"), &self.tile)?;
+        let mut bin = Vec::new();
+        bin.extend_from_slice(b"UMBRAFRM");
+        bin.extend_from_slice(&FRAMES_FORMAT_VERSION.to_le_bytes());
+        for f in &self.frames {
+            for h in &f.heights_m {
+                bin.extend_from_slice(&h.to_le_bytes());
+            }
+        }
+        fs::write(dir.join("frames.bin"), bin)?;
+        let metas: Vec<&FrameMeta> = self.frames.iter().map(|f| &f.meta).collect();
+        fs::write(
+            dir.join("frames.json"),
+            serde_json::to_string_pretty(&metas)?,
+        )?;
+        Ok(())
+    }
+
+    /// Read a set written by [`FrameSet::write`].
+    pub fn read(dir: &Path) -> Result<Self> {
+        let tile = fs::read(dir.join("tile.bin")).context("tile.bin")?;
+        let metas: Vec<FrameMeta> =
+            serde_json::from_slice(&fs::read(dir.join("frames.json")).context("frames.json")?)?;
+        let bin = fs::read(dir.join("frames.bin")).context("frames.bin")?;
+        if bin.get(..8) != Some(b"UMBRAFRM")
+            || bin.get(8..12) != Some(&FRAMES_FORMAT_VERSION.to_le_bytes()[..])
+        {
+            bail!("frames.bin: not a version-{FRAMES_FORMAT_VERSION} frame file");
+        }
+        let mut at = 12;
+        let mut frames = Vec::with_capacity(metas.len());
+        for meta in metas {
+            let n = meta.width as usize * meta.height as usize * 4;
+            let bytes = bin.get(at..at + n).context("frames.bin truncated")?;
+            at += n;
+            let heights_m = bytes
+                .chunks_exact(4)
+                .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+                .collect();
+            frames.push(Frame { meta, heights_m });
+        }
+        Ok(Self { tile, frames })
+    }
+}

@@ -1,0 +1,77 @@
+//! The firmware under QEMU on a few frames (one terrain frame and the five stress frames, with
+//! link faults): every result bit-exact with the host, the instruction bound, static RAM.
+//!
+//! Needs `qemu-system-arm`, `gcc`, `mkfifo` and the `thumbv7em-none-eabihf` target; without them
+//! the test says so and passes (`.ci/run` installs them, so CI always runs it).
+
+use hil_bridge::host::runner::{INSTRUCTION_BUDGET, RunOptions, STATIC_RAM_BUDGET, run};
+use std::path::PathBuf;
+use std::process::Command;
+
+fn have(cmd: &str, arg: &str) -> bool {
+    Command::new(cmd)
+        .arg(arg)
+        .output()
+        .is_ok_and(|o| o.status.success())
+}
+
+fn missing_tools() -> Vec<&'static str> {
+    let mut missing = Vec::new();
+    if !have("qemu-system-arm", "--version") {
+        missing.push("qemu-system-arm");
+    }
+    if !have("gcc", "--version") {
+        missing.push("gcc");
+    }
+    if !have("mkfifo", "--version") {
+        missing.push("mkfifo");
+    }
+    let targets = Command::new("rustup")
+        .args(["target", "list", "--installed"])
+        .output()
+        .map(|o| String::from_utf8_lossy(&o.stdout).into_owned())
+        .unwrap_or_default();
+    if !targets.contains("thumbv7em-none-eabihf") {
+        missing.push("rustup target thumbv7em-none-eabihf");
+    }
+    missing
+}
+
+#[test]
+fn firmware_is_bit_exact_and_within_the_instruction_budget() {
+    let missing = missing_tools();
+    if !missing.is_empty() {
+        eprintln!(
+            "SKIPPED firmware_is_bit_exact_and_within_the_instruction_budget: missing {} \
+             (bash .ci/run installs them)",
+            missing.join(", ")
+        );
+        return;
+    }
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..");
+    let mut opts = RunOptions::new(root);
+    opts.frames = Some(6);
+    opts.progress = true;
+    let report = run(&opts).expect("HIL run");
+    assert_eq!(report.frames, 6);
+    assert_eq!(
+        report.bit_exact_frames, report.frames,
+        "target and host results differ"
+    );
+    assert!(
+        report.max_instructions_per_frame <= INSTRUCTION_BUDGET,
+        "worst frame {} instructions > {INSTRUCTION_BUDGET}",
+        report.max_instructions_per_frame
+    );
+    // Counts are deterministic: every frame was measured and none is implausibly small.
+    assert!(report.per_frame.iter().all(|f| f.instructions > 1_000_000));
+    assert!(report.static_ram_bytes <= STATIC_RAM_BUDGET);
+    assert!(report.link_errors_injected >= 3);
+    assert_eq!(report.link_errors_recovered, report.link_errors_injected);
+    let s = report.target_status;
+    assert_eq!(s.frames_done, 6, "{s:?}");
+    assert!(
+        s.crc_errors + s.cobs_errors + s.seq_gaps + s.duplicates > 0,
+        "{s:?}"
+    );
+}
