@@ -36,6 +36,9 @@ enum Commands {
     Eval(cli::eval::Args),
     /// Simulate dual-antenna SAR echoes over a DEM and focus them into SLCs.
     Sar(SarArgs),
+    /// DEM from the interferogram: SAR (or given SLCs) → InSAR DEM, slope, mask, reference tile,
+    /// pictures and report.json, compared with the input DEM.
+    Insar(cli::insar::Args),
     /// Point-target analysis (IRW, PSLR, ISLR, peak location, interferometric phase).
     Psf(PsfArgs),
     /// Run everything available end to end into one folder (today: terrain and pictures).
@@ -54,6 +57,7 @@ fn main() -> ExitCode {
         Commands::Trn(a) => cli::trn::run(a),
         Commands::Eval(a) => cli::eval::run(a),
         Commands::Sar(a) => run_sar(a.clone()),
+        Commands::Insar(a) => cli::insar::run(a),
         Commands::Psf(a) => run_psf(a.clone()),
     };
     match result {

@@ -5,6 +5,7 @@
 pub mod demo;
 pub mod eval;
 pub mod info;
+pub mod insar;
 pub mod register;
 pub mod resample;
 pub mod terrain;
