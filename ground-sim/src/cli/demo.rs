@@ -23,10 +23,10 @@ use ground_sim::insar::products::{InsarReport, RunContext, SarSummary, write_out
 use ground_sim::matchplot::match_picture;
 use ground_sim::onboard::{FrameInput, new_workspace, run_frame, with_big_stack};
 use ground_sim::reference::load;
+use ground_sim::sar::SarDem;
 use ground_sim::sar::cli::RadarArgs;
 use ground_sim::sar::pipeline::{SimOptions, simulate_with};
 use ground_sim::sar::products::write_products;
-use ground_sim::sar::SarDem;
 use ground_sim::terrain::{Preset, TerrainParams};
 use ground_sim::trn::{TrnScore, score};
 use nav_core::{NavConfig, Navigator, Tile};

@@ -204,8 +204,10 @@ pub fn compare(
                 continue;
             }
             viol += 1;
-            let near_mask = (r.saturating_sub(1)..(r + 2).min(h))
-                .any(|rr| (c.saturating_sub(1)..(c + 2).min(w)).any(|cc| p.labels[rr * w + cc] != label::VALID));
+            let near_mask = (r.saturating_sub(1)..(r + 2).min(h)).any(|rr| {
+                (c.saturating_sub(1)..(c + 2).min(w))
+                    .any(|cc| p.labels[rr * w + cc] != label::VALID)
+            });
             if near_mask {
                 viol_masked += 1;
             }

@@ -94,12 +94,12 @@ pub fn estimate_residual_offset(
     };
     let trials: Vec<f64> = (-5..=5).map(|k| 0.1 * f64::from(k)).collect();
     let cohs: Vec<f64> = trials.iter().map(|&e| mean_coh(e, offset)).collect();
-    let (best, _) = cohs
-        .iter()
-        .enumerate()
-        .fold((0usize, f64::NEG_INFINITY), |(bi, bv), (i, &v)| {
-            if v > bv { (i, v) } else { (bi, bv) }
-        });
+    let (best, _) =
+        cohs.iter()
+            .enumerate()
+            .fold((0usize, f64::NEG_INFINITY), |(bi, bv), (i, &v)| {
+                if v > bv { (i, v) } else { (bi, bv) }
+            });
     let mut residual = trials[best];
     if best > 0 && best + 1 < cohs.len() {
         let (l, c, r) = (cohs[best - 1], cohs[best], cohs[best + 1]);
@@ -134,7 +134,11 @@ mod tests {
         let n = 256;
         let mut spec = vec![C32::new(0.0, 0.0); n];
         for (k, s) in spec.iter_mut().enumerate() {
-            let f = if k < n / 2 { k as f64 } else { k as f64 - n as f64 } / n as f64;
+            let f = if k < n / 2 {
+                k as f64
+            } else {
+                k as f64 - n as f64
+            } / n as f64;
             if f.abs() < 0.22 {
                 let a = (k as f64 * 1.7).sin();
                 let b = (k as f64 * 2.3).cos();
@@ -144,7 +148,11 @@ mod tests {
         let signal = |u: f64| -> C32 {
             let mut acc = crate::sar::C64::new(0.0, 0.0);
             for (k, s) in spec.iter().enumerate() {
-                let f = if k < n / 2 { k as f64 } else { k as f64 - n as f64 } / n as f64;
+                let f = if k < n / 2 {
+                    k as f64
+                } else {
+                    k as f64 - n as f64
+                } / n as f64;
                 let ph = std::f64::consts::TAU * f * u;
                 acc += crate::sar::C64::new(f64::from(s.re), f64::from(s.im))
                     * crate::sar::C64::new(ph.cos(), ph.sin());
@@ -156,11 +164,15 @@ mod tests {
         let offs = vec![0.3; n];
         let out = resample_range(&line, 1, n, &offs, 0.0, &k);
         let (mut err, mut pow) = (0.0f64, 0.0f64);
-        for j in 20..n - 20 {
+        for (j, &got) in out.iter().enumerate().take(n - 20).skip(20) {
             let want = signal(j as f64 + 0.3);
-            err += f64::from((out[j] - want).norm_sqr());
+            err += f64::from((got - want).norm_sqr());
             pow += f64::from(want.norm_sqr());
         }
-        assert!(10.0 * (err / pow).log10() < -50.0, "{}", 10.0 * (err / pow).log10());
+        assert!(
+            10.0 * (err / pow).log10() < -50.0,
+            "{}",
+            10.0 * (err / pow).log10()
+        );
     }
 }

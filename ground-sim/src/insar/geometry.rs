@@ -50,7 +50,9 @@ impl PairGeometry {
             )));
         }
         if a1.polarisation != a2.polarisation {
-            return Err(InsarError::Input("the two SLCs have different channels".into()));
+            return Err(InsarError::Input(
+                "the two SLCs have different channels".into(),
+            ));
         }
         let same = |a: f64, b: f64| (a - b).abs() <= 1e-9 * a.abs().max(1.0);
         if (a1.lines, a1.gates) != (a2.lines, a2.gates)
@@ -77,7 +79,9 @@ impl PairGeometry {
         let dz = a2.antenna_yz_m[1] - a1.antenna_yz_m[1];
         let baseline_m = dy.hypot(dz);
         if !(baseline_m > 1e-3) {
-            return Err(InsarError::Input(format!("baseline {baseline_m} m is too short")));
+            return Err(InsarError::Input(format!(
+                "baseline {baseline_m} m is too short"
+            )));
         }
         let g = Self {
             a1_yz_m: a1.antenna_yz_m,
@@ -200,11 +204,7 @@ impl PairGeometry {
 pub fn wrap_rad(a: f64) -> f64 {
     let t = std::f64::consts::TAU;
     let w = a - t * (a / t).round();
-    if w <= -std::f64::consts::PI {
-        w + t
-    } else {
-        w
-    }
+    if w <= -std::f64::consts::PI { w + t } else { w }
 }
 
 #[cfg(test)]
@@ -243,7 +243,11 @@ pub(crate) mod tests {
     fn ambiguity_height_is_the_design_value() {
         let g = pair_geometry();
         let r = 100e3 / 26f64.to_radians().cos();
-        assert!((g.ambiguity_height_m(r) - 732.9).abs() < 0.5, "{}", g.ambiguity_height_m(r));
+        assert!(
+            (g.ambiguity_height_m(r) - 732.9).abs() < 0.5,
+            "{}",
+            g.ambiguity_height_m(r)
+        );
         assert!((g.tilt_rad.to_degrees() - 30.0).abs() < 1e-9);
         assert!((g.baseline_m - 8.0).abs() < 1e-9);
     }
@@ -261,7 +265,12 @@ pub(crate) mod tests {
     #[test]
     fn eq17_with_the_midpoint_look_angle_matches_the_exact_inversion() {
         let g = pair_geometry();
-        for &(y, h) in &[(2000.0, 0.0), (1000.0, 50.0), (3000.0, -120.0), (2500.0, 350.0)] {
+        for &(y, h) in &[
+            (2000.0, 0.0),
+            (1000.0, 50.0),
+            (3000.0, -120.0),
+            (2500.0, 350.0),
+        ] {
             let z = g.datum_m + h;
             let (phi, r1) = g.point_phase_rad(y, z);
             let dphi = phi - g.flat_phase_rad(r1);
@@ -273,7 +282,10 @@ pub(crate) mod tests {
             // Eq 17 at the flat look angle alone is off by up to ~1 % of h (the paper's
             // first-order form); the midpoint angle removes it.
             let flat = g.eq17_height_m(dphi, r1, g.flat_look_angle_rad(r1));
-            assert!((flat - h).abs() <= 1e-2 * h.abs() + 1e-3, "flat eq 17 {flat} vs {h}");
+            assert!(
+                (flat - h).abs() <= 1e-2 * h.abs() + 1e-3,
+                "flat eq 17 {flat} vs {h}"
+            );
         }
     }
 

@@ -95,7 +95,10 @@ pub fn multilook(
         .collect();
     // Per SLC line: range-window sums at every output gate; then sum `size` lines.
     let row_sums = |i: usize| -> Vec<(C64, C64, f64, f64)> {
-        let (r1, r2) = (&a1[i * gates..(i + 1) * gates], &a2[i * gates..(i + 1) * gates]);
+        let (r1, r2) = (
+            &a1[i * gates..(i + 1) * gates],
+            &a2[i * gates..(i + 1) * gates],
+        );
         (0..go)
             .map(|m| {
                 let mut acc = (C64::new(0.0, 0.0), C64::new(0.0, 0.0), 0.0, 0.0);

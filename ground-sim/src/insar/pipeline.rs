@@ -5,7 +5,9 @@ use std::time::Instant;
 
 use serde::Serialize;
 
-use super::coreg::{ResidualOffset, estimate_residual_offset, predicted_offset_gates, resample_range};
+use super::coreg::{
+    ResidualOffset, estimate_residual_offset, predicted_offset_gates, resample_range,
+};
 use super::geocode::{GeocodeParams, OutputGrid, RadarPixels, eq20_mask, geocode, label};
 use super::geometry::{PairGeometry, wrap_rad};
 use super::looks::{LookWindow, equivalent_looks_1d, multilook, phase_crlb_rad};
@@ -408,7 +410,13 @@ pub fn process_pair(
     let masked = |ch: &[f64]| -> Vec<f32> {
         ch.iter()
             .zip(&out_labels)
-            .map(|(&v, &l)| if l == label::VALID { v as f32 } else { f32::NAN })
+            .map(|(&v, &l)| {
+                if l == label::VALID {
+                    v as f32
+                } else {
+                    f32::NAN
+                }
+            })
             .collect()
     };
     if cfg.dem_filter_sigma_px > 0.0 {
@@ -497,7 +505,13 @@ pub fn gaussian_filter(z: &[f64], w: usize, h: usize, sigma_px: f64) -> Vec<f64>
     let out = pass(&pass(&init, true), false);
     out.iter()
         .zip(z)
-        .map(|(&(a, b), &v)| if v.is_finite() && b > 0.0 { a / b } else { f64::NAN })
+        .map(|(&(a, b), &v)| {
+            if v.is_finite() && b > 0.0 {
+                a / b
+            } else {
+                f64::NAN
+            }
+        })
         .collect()
 }
 

@@ -14,9 +14,9 @@ use super::geometry::PairGeometry;
 use super::pipeline::{
     CoregReport, InsarConfig, InsarProduct, MaskFractions, TruthOnGrid, UnwrapReport,
 };
+use crate::analysis::slope_deg;
 use crate::dem::{Dem, SampleKind, write_geotiff};
 use crate::reference::{TileSummary, write_reference};
-use crate::analysis::slope_deg;
 use crate::render::{ColourMap, RasterStyle, raster_image};
 use crate::sar::pipeline::{InsarPair, Timings};
 use crate::sar::{Derived, SarConfig};
@@ -166,7 +166,12 @@ pub fn write_outputs(
     let err_dem = p.grid.raster(err.clone())?;
     tif(&err_dem, ERROR_FILE, SampleKind::F32, &mut files)?;
     tif(truth_grid, TRUTH_FILE, SampleKind::F32, &mut files)?;
-    tif(&truth.window, TRUTH_WINDOW_FILE, SampleKind::F32, &mut files)?;
+    tif(
+        &truth.window,
+        TRUTH_WINDOW_FILE,
+        SampleKind::F32,
+        &mut files,
+    )?;
 
     // Pictures. Radar geometry: rows = azimuth, columns = slant range (near range left), one
     // pixel per multilook window (≈ 20 m × 20 m on the ground).
@@ -231,7 +236,11 @@ pub fn write_outputs(
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
             (a.min(f64::from(v)), b.max(f64::from(v)))
         });
-    let zr = if zhi > zlo { (zlo, zhi) } else { (zlo - 1.0, zlo + 1.0) };
+    let zr = if zhi > zlo {
+        (zlo, zhi)
+    } else {
+        (zlo - 1.0, zlo + 1.0)
+    };
     let slope_range = crate::render::SLOPE_RANGE_DEG;
     for (dem, name, what) in [
         (&p.dem, "fig6a-insar-dem.png", "Fig 6a: InSAR DEM"),
@@ -255,7 +264,11 @@ pub fn write_outputs(
     }
     for (dem, name, what) in [
         (&p.dem, "fig6b-insar-slope.png", "Fig 6b: InSAR slope"),
-        (truth_grid, "truth-slope.png", "truth slope at the same grid"),
+        (
+            truth_grid,
+            "truth-slope.png",
+            "truth slope at the same grid",
+        ),
     ] {
         png(
             raster_image(

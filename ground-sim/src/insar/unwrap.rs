@@ -170,7 +170,10 @@ mod tests {
             if q[i] < 0.3 {
                 continue;
             }
-            assert!((u.phase_rad[i] - (truth[i] - shift)).abs() < 1e-9, "pixel {i}");
+            assert!(
+                (u.phase_rad[i] - (truth[i] - shift)).abs() < 1e-9,
+                "pixel {i}"
+            );
         }
         assert!(u.pixels_changed > 0);
         assert_eq!(u.regions, 1);
@@ -184,6 +187,11 @@ mod tests {
         let u = unwrap_quality_guided(&wrapped, &q, w, h, 0.3);
         assert_eq!(u.pixels_changed, 0);
         assert_eq!(u.global_cycles, 0);
-        assert!(u.phase_rad.iter().zip(&wrapped).all(|(a, b)| (a - b).abs() < 1e-12));
+        assert!(
+            u.phase_rad
+                .iter()
+                .zip(&wrapped)
+                .all(|(a, b)| (a - b).abs() < 1e-12)
+        );
     }
 }

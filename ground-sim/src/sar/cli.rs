@@ -142,7 +142,8 @@ pub struct PsfArgs {
 /// neighbours, see [`SarDem::from_dem`]). `pixel_override` replaces the pixel size taken from
 /// the georeferencing (for grids whose map unit is not the metre).
 pub fn read_geotiff_dem(path: &Path, pixel_override: Option<f64>) -> anyhow::Result<SarDem> {
-    let dem = crate::dem::read_geotiff(path).with_context(|| format!("reading {}", path.display()))?;
+    let dem =
+        crate::dem::read_geotiff(path).with_context(|| format!("reading {}", path.display()))?;
     let (mut sdem, filled) = SarDem::from_dem(&dem)?;
     if filled > 0 {
         eprintln!("SAR: filled {filled} nodata heights from their neighbours");

@@ -83,9 +83,7 @@ impl SarDem {
     /// square pixel. NaN (nodata) heights are filled from their valid neighbours (repeated
     /// 4-neighbour means growing inwards); returns the DEM and how many heights were filled.
     pub fn from_dem(dem: &crate::dem::Dem) -> SarResult<(Self, usize)> {
-        let pixel_m = dem
-            .pixel_m()
-            .map_err(|e| SarError::Dem(format!("{e}")))?;
+        let pixel_m = dem.pixel_m().map_err(|e| SarError::Dem(format!("{e}")))?;
         let (w, h) = (dem.width(), dem.height());
         let mut z = dem.heights_m().to_vec();
         let filled = fill_nodata(&mut z, w, h)?;
@@ -493,7 +491,17 @@ mod tests {
 
     #[test]
     fn nodata_is_filled_from_neighbours() {
-        let mut z = vec![1.0, f32::NAN, 3.0, f32::NAN, f32::NAN, f32::NAN, 7.0, 8.0, 9.0];
+        let mut z = vec![
+            1.0,
+            f32::NAN,
+            3.0,
+            f32::NAN,
+            f32::NAN,
+            f32::NAN,
+            7.0,
+            8.0,
+            9.0,
+        ];
         assert_eq!(fill_nodata(&mut z, 3, 3).unwrap(), 4);
         assert!(z.iter().all(|v| v.is_finite()));
         assert_eq!(z[1], 2.0);
