@@ -41,7 +41,8 @@ enum Commands {
     Insar(cli::insar::Args),
     /// Point-target analysis (IRW, PSLR, ISLR, peak location, interferometric phase).
     Psf(PsfArgs),
-    /// Run everything available end to end into one folder (today: terrain and pictures).
+    /// The whole ground chain on the shackleton preset: terrain → SAR → InSAR → reference tile →
+    /// one TRN check, with a summary table.
     Demo(cli::demo::Args),
 }
 
