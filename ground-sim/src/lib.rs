@@ -13,6 +13,8 @@
 //!   closed depressions and the main crater's depth/diameter.
 //! - [`render`]: PNG hillshade, elevation and slope pictures with labelled colour bars.
 //! - [`sar`]: dual-antenna SAR echoes over a DEM and Range-Doppler focusing (paper section II).
+//! - [`insar`]: DEM from the interferogram (coregistration, flat phase, eq 17, multilook,
+//!   unwrapping, geometric correction, mask), accuracy against the truth, the reference folder.
 //! - [`tile`], [`reference`]: reference tiles (SURF by nav-core) and reference folders.
 //! - [`frames`], [`onboard`], [`trn`], [`register`]: synthetic flyer frames, the flight code as
 //!   the ground runs it, and scoring against the truth.
@@ -28,6 +30,7 @@ pub mod analysis;
 pub mod dem;
 pub mod descent;
 pub mod frames;
+pub mod insar;
 pub mod matchplot;
 pub mod onboard;
 pub mod plot;

@@ -40,9 +40,13 @@ enum Commands {
     Results(cli::results::Args),
     /// Simulate dual-antenna SAR echoes over a DEM and focus them into SLCs.
     Sar(SarArgs),
+    /// DEM from the interferogram: SAR (or given SLCs) → InSAR DEM, slope, mask, reference tile,
+    /// pictures and report.json, compared with the input DEM.
+    Insar(cli::insar::Args),
     /// Point-target analysis (IRW, PSLR, ISLR, peak location, interferometric phase).
     Psf(PsfArgs),
-    /// Run everything available end to end into one folder (today: terrain and pictures).
+    /// The whole ground chain on the shackleton preset: terrain → SAR → InSAR → reference tile →
+    /// one TRN check, with a summary table.
     Demo(cli::demo::Args),
 }
 
@@ -70,6 +74,7 @@ fn dispatch(cli: Cli) -> anyhow::Result<()> {
         Commands::Eval(a) => cli::eval::run(a),
         Commands::Descent(a) => cli::descent::run(a),
         Commands::Sar(a) => run_sar(a.clone()),
+        Commands::Insar(a) => cli::insar::run(a),
         Commands::Psf(a) => run_psf(a.clone()),
         Commands::Results(a) => cli::results::run(a, &|args| dispatch(Cli::try_parse_from(args)?)),
     }

@@ -392,6 +392,124 @@ pub fn slope_image(dem: &Dem) -> Result<RgbImage, DemError> {
     ))
 }
 
+/// Cyclic map (red → yellow → green → cyan → blue → magenta → red) for wrapped phases.
+const PHASE_STOPS: [[u8; 3]; 7] = [
+    [220, 40, 40],
+    [230, 200, 40],
+    [60, 190, 60],
+    [40, 200, 210],
+    [50, 70, 220],
+    [200, 50, 200],
+    [220, 40, 40],
+];
+
+/// Black to white.
+const GREY_STOPS: [[u8; 3]; 2] = [[0, 0, 0], [255, 255, 255]];
+
+/// Diverging blue–white–red map for signed errors.
+const DIVERGING_STOPS: [[u8; 3]; 5] = [
+    [33, 102, 172],
+    [146, 197, 222],
+    [247, 247, 247],
+    [244, 165, 130],
+    [178, 24, 43],
+];
+
+/// Categorical colours for the InSAR mask codes 0–4 (valid, layover, shadow, low coherence,
+/// outside); one stop per code so that integer values hit their colour exactly.
+const MASK_STOPS: [[u8; 3]; 5] = [
+    [235, 235, 235],
+    [230, 120, 20],
+    [30, 30, 120],
+    [180, 40, 160],
+    [120, 120, 120],
+];
+
+/// Colour maps offered by [`raster_image`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ColourMap {
+    /// Viridis-like elevation map.
+    Elevation,
+    /// Magma-like slope map.
+    Slope,
+    /// Cyclic map for wrapped phases (the two ends have one colour).
+    Phase,
+    /// Grey ramp (e.g. coherence).
+    Grey,
+    /// Blue–white–red for signed differences.
+    Diverging,
+    /// Five categorical colours for integer codes 0–4 over `lo = 0`, `hi = 4`.
+    Mask,
+}
+
+impl ColourMap {
+    fn stops(self) -> &'static [[u8; 3]] {
+        match self {
+            Self::Elevation => &ELEV_STOPS,
+            Self::Slope => &SLOPE_STOPS,
+            Self::Phase => &PHASE_STOPS,
+            Self::Grey => &GREY_STOPS,
+            Self::Diverging => &DIVERGING_STOPS,
+            Self::Mask => &MASK_STOPS,
+        }
+    }
+}
+
+/// Title, colours and value range of a [`raster_image`].
+#[derive(Debug, Clone, Copy)]
+pub struct RasterStyle<'a> {
+    /// Title above the map.
+    pub title: &'a str,
+    /// Colour map.
+    pub map: ColourMap,
+    /// Values mapped to the two ends of the colour map.
+    pub range: (f64, f64),
+    /// Unit written after the colour-bar ticks.
+    pub unit: &'a str,
+}
+
+/// Any raster (`w × h`, row-major, NaN = nodata in grey) colour-mapped over `[lo, hi]` with a
+/// title, a colour bar labelled in `unit` and a scale bar for `pixel_m`. Rasters smaller than
+/// 300 px a side are magnified by an integer factor (nearest neighbour) for legibility.
+pub fn raster_image(
+    values: &[f32],
+    w: usize,
+    h: usize,
+    pixel_m: f64,
+    style: &RasterStyle<'_>,
+) -> RgbImage {
+    let RasterStyle {
+        title,
+        map,
+        range: (lo, hi),
+        unit,
+    } = *style;
+    let side = w.max(h).max(1);
+    let s = side.div_ceil(MAX_PICTURE_SIDE).max(1);
+    let (dw, dh, v) = decimated(values, w, h, s);
+    let mag = (600 / (dw.max(dh).max(1) as usize)).max(1) as u32;
+    let (pw, ph) = (dw * mag, dh * mag);
+    let stops = map.stops();
+    let span = if hi > lo { hi - lo } else { 1.0 };
+    let mut rgb = Vec::with_capacity((pw * ph) as usize);
+    for y in 0..ph {
+        for x in 0..pw {
+            let val = v[((y / mag) * dw + x / mag) as usize];
+            rgb.push(if val.is_finite() {
+                colormap(stops, (f64::from(val) - lo) / span)
+            } else {
+                NODATA_RGB
+            });
+        }
+    }
+    compose(
+        &Panel { w: pw, h: ph, rgb },
+        title,
+        Some((stops, lo, hi, unit)),
+        pixel_m * s as f64 / f64::from(mag),
+    )
+}
+
 /// Write the three pictures as `hillshade.png`, `elevation.png`, `slope.png` in `dir`; returns
 /// the paths written.
 pub fn write_pictures(dem: &Dem, dir: &Path) -> Result<Vec<std::path::PathBuf>, DemError> {

@@ -1,12 +1,35 @@
-//! `ground-sim demo`: everything that exists so far, end to end, into one folder.
+//! `ground-sim demo`: the whole ground chain end to end into one folder.
 //!
-//! Today: the `shackleton` preset terrain, its GeoTIFF, pictures and statistics. Later stages
-//! (SAR, InSAR, reference tile, TRN) append their own step functions to [`run_demo`].
+//! terrain (`shackleton` preset) → SAR echoes and focusing (both antennas, HH) → InSAR DEM,
+//! slope, mask and reference tile → one TRN check (a synthetic 10 m frame from the truth DEM
+//! against the InSAR tile), then a summary table. Products:
+//!
+//! - `OUT/dem.tif`, `OUT/{hillshade,elevation,slope}.png`, `OUT/info.json` — the truth terrain;
+//! - `OUT/sar/` — SLCs, σ0 pictures, SAR `report.json`;
+//! - `OUT/insar/` — the reference folder (`tile.bin`, `slope.tif`, `reference-dem.tif`,
+//!   `tile.json`) plus coherence/mask GeoTIFFs, Fig. 5/6 pictures and InSAR `report.json`;
+//! - `OUT/trn.json`, `OUT/trn.png` — the TRN check (the paper's Fig. 7);
+//! - `OUT/demo.json` — this summary.
 
 use std::path::{Path, PathBuf};
+use std::time::Instant;
 
+use anyhow::{Context, anyhow};
 use ground_sim::dem::SampleKind;
+use ground_sim::frames::{FramePose, SensorModel, frame_slope_deg, synth_frame};
+use ground_sim::insar::InsarConfig;
+use ground_sim::insar::pipeline::process_simulated;
+use ground_sim::insar::products::{InsarReport, RunContext, SarSummary, write_outputs};
+use ground_sim::matchplot::match_picture;
+use ground_sim::onboard::{FrameInput, new_workspace, run_frame, with_big_stack};
+use ground_sim::reference::load;
+use ground_sim::sar::SarDem;
+use ground_sim::sar::cli::RadarArgs;
+use ground_sim::sar::pipeline::{SimOptions, simulate_with};
+use ground_sim::sar::products::write_products;
 use ground_sim::terrain::{Preset, TerrainParams};
+use ground_sim::trn::{TrnScore, score};
+use nav_core::{NavConfig, Navigator, Tile};
 
 /// Arguments of `ground-sim demo`.
 #[derive(Debug, clap::Args)]
@@ -14,12 +37,21 @@ pub struct Args {
     /// Output folder.
     #[arg(long, default_value = "out/demo")]
     pub out: PathBuf,
-    /// PRNG seed.
+    /// Terrain seed.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// Write the summary JSON here (default: OUT/demo.json).
     #[arg(long)]
     pub json: Option<PathBuf>,
+    /// Heading of the TRN frame: its +x axis, clockwise from east, degrees.
+    #[arg(long, default_value_t = 0.0)]
+    pub heading_deg: f64,
+    /// Thermal noise of the radar, NESZ in dB (default: none, the paper's echo model).
+    #[arg(long, allow_hyphen_values = true)]
+    pub nesz_db: Option<f64>,
+    /// Hide progress bars.
+    #[arg(long)]
+    pub no_progress: bool,
 }
 
 /// One line of the demo summary table.
@@ -40,20 +72,32 @@ pub struct DemoStep {
 pub struct DemoSummary {
     /// Steps run, in order.
     pub steps: Vec<DemoStep>,
+    /// Whole run, wall-clock seconds.
+    pub total_s: f64,
     /// The terrain step's full output.
     pub terrain: super::terrain::TerrainOutput,
+    /// Radar simulation summary.
+    pub sar: SarSummary,
+    /// The InSAR report (also `OUT/insar/report.json`).
+    pub insar: InsarReport,
+    /// The TRN check (also `OUT/trn.json`).
+    pub trn: TrnScore,
 }
 
-/// Run every available stage into `out`.
-pub fn run_demo(out: &Path, seed: u64) -> anyhow::Result<DemoSummary> {
+/// Run every stage into `out`.
+pub fn run_demo(a: &Args) -> anyhow::Result<DemoSummary> {
+    let out = &a.out;
+    let t_all = Instant::now();
     let mut steps = Vec::new();
-    let t0 = std::time::Instant::now();
+
+    // 1. Terrain.
+    let t0 = Instant::now();
     let mut params = TerrainParams::new(Preset::Shackleton);
-    params.seed = seed;
+    params.seed = a.seed;
     let dem_path = out.join("dem.tif");
     let terrain = super::terrain::make(&params, &dem_path, SampleKind::F32, Some(out))?;
     let s = &terrain.stats;
-    let mut files = vec![dem_path];
+    let mut files = vec![dem_path.clone()];
     files.extend(terrain.pictures.iter().cloned());
     steps.push(DemoStep {
         step: "terrain (shackleton, floor)".into(),
@@ -70,23 +114,185 @@ pub fn run_demo(out: &Path, seed: u64) -> anyhow::Result<DemoSummary> {
         files,
         seconds: t0.elapsed().as_secs_f64(),
     });
-    // Later issues: SAR echoes, RDA focusing, InSAR DEM, reference tile, TRN fixes.
-    Ok(DemoSummary { steps, terrain })
+
+    // 2. SAR: both antennas, HH, Range-Doppler focusing.
+    let t0 = Instant::now();
+    let truth = ground_sim::dem::read_geotiff(&dem_path)?;
+    let radar = RadarArgs {
+        nesz_db: a.nesz_db,
+        ..RadarArgs::default()
+    };
+    let (sar_cfg, pol) = super::insar::radar_config(&radar)?;
+    let (sdem, filled) = SarDem::from_dem(&truth)?;
+    let opts = SimOptions {
+        progress: !a.no_progress,
+        ..SimOptions::default()
+    };
+    let pair = simulate_with(&sdem, &sar_cfg, &opts)?;
+    let sar_dir = out.join("sar");
+    let sar_report = write_products(&pair, [sdem.width, sdem.height], sdem.pixel_m, &sar_dir)?;
+    let slc = &pair.slcs[0];
+    steps.push(DemoStep {
+        step: "SAR (A1+A2, HH, RDA)".into(),
+        result: format!(
+            "{} facets, SLC {}x{}, NESZ {}, echoes {:.1} s",
+            pair.stats.facets,
+            slc.lines,
+            slc.gates,
+            if sar_cfg.noise_sigma0_linear().is_some() {
+                format!("{} dB", sar_cfg.noise_equivalent_sigma0_db)
+            } else {
+                "none".into()
+            },
+            pair.timings.echoes_s
+        ),
+        files: vec![sar_dir.clone(), sar_report],
+        seconds: t0.elapsed().as_secs_f64(),
+    });
+
+    // 3. InSAR and the reference folder.
+    let t0 = Instant::now();
+    let cfg = InsarConfig::default().with_radar(&sar_cfg);
+    let (truth_grid, product) = process_simulated(&truth, &pair, pol, &cfg)?;
+    let insar_dir = out.join("insar");
+    let ctx = RunContext {
+        sar: Some(SarSummary::of(&pair)),
+        input_dem: Some(dem_path.clone()),
+        filled_nodata: filled,
+    };
+    let insar = write_outputs(&insar_dir, &product, &truth_grid, &ctx)?;
+    let acc = &insar.accuracy;
+    steps.push(DemoStep {
+        step: "InSAR DEM (20 m)".into(),
+        result: format!(
+            "height RMSE {:.2} m (CRLB {:.2} m), slope RMSE {:.2}°, valid {:.1} %, coherence {:.3}",
+            acc.height_rmse_m,
+            acc.crlb_height_m,
+            acc.slope_rmse_deg,
+            100.0 * acc.valid_fraction,
+            acc.coherence_mean
+        ),
+        files: vec![insar_dir.join("report.json")],
+        seconds: t0.elapsed().as_secs_f64() - insar.products_s,
+    });
+    steps.push(DemoStep {
+        step: "reference tile".into(),
+        result: format!(
+            "{}x{} px at {} m, {} SURF features, {} bytes",
+            insar.tile.width_px,
+            insar.tile.height_px,
+            insar.tile.pixel_m,
+            insar.tile_features,
+            insar.tile.tile_bytes
+        ),
+        files: vec![insar_dir.join(ground_sim::reference::TILE_FILE)],
+        seconds: insar.products_s,
+    });
+
+    // 4. One TRN check: a 10 m frame from the truth at the tile centre.
+    let t0 = Instant::now();
+    let trn = trn_check(&insar_dir, &truth, a.heading_deg, out)?;
+    steps.push(DemoStep {
+        step: format!("TRN check (10 m frame, {}°)", a.heading_deg),
+        result: match (trn.rotation_deg, trn.pos_err_m) {
+            (Some(r), Some(p)) => format!(
+                "fix: {} matches, {} inliers, rotation {:.2}° (error {:+.2}°), scale {:.3}, \
+                 position error {:.1} m, registration mean/max {:.2}/{:.2} px",
+                trn.matches,
+                trn.inliers,
+                r,
+                trn.heading_err_deg.unwrap_or(f64::NAN),
+                trn.scale.unwrap_or(f64::NAN),
+                p,
+                trn.pos_err_mean_px.unwrap_or(f64::NAN),
+                trn.pos_err_max_px.unwrap_or(f64::NAN)
+            ),
+            _ => format!(
+                "no fix ({}): {} matches, {} inliers",
+                trn.no_fix_reason.as_deref().unwrap_or("?"),
+                trn.matches,
+                trn.inliers
+            ),
+        },
+        files: vec![out.join("trn.json"), out.join("trn.png")],
+        seconds: t0.elapsed().as_secs_f64(),
+    });
+
+    Ok(DemoSummary {
+        steps,
+        total_s: t_all.elapsed().as_secs_f64(),
+        terrain,
+        sar: SarSummary::of(&pair),
+        insar,
+        trn,
+    })
+}
+
+/// A synthetic 10 m frame (200 × 200 px, default sensor noise) from `truth` at the centre of
+/// the tile in `tile_dir`, located by the onboard chain and scored; writes `trn.json` and the
+/// match picture `trn.png` into `out`.
+fn trn_check(
+    tile_dir: &Path,
+    truth: &ground_sim::dem::Dem,
+    heading_deg: f64,
+    out: &Path,
+) -> anyhow::Result<TrnScore> {
+    let reference = load(tile_dir)?;
+    let tile = Tile::parse(&reference.tile_bytes).map_err(|e| anyhow!("{e}"))?;
+    let h = tile.header();
+    let (cx, cy) = h.pixel_to_geo(
+        (h.width_px as f64 - 1.0) / 2.0,
+        (h.height_px as f64 - 1.0) / 2.0,
+    );
+    let pose = FramePose {
+        x_m: cx,
+        y_m: cy,
+        heading_rad: heading_deg.to_radians(),
+        pixel_m: 10.0,
+    };
+    let sensor = SensorModel::default();
+    let frame = synth_frame(truth, &pose, &sensor, 1)?;
+    let nav = Navigator::new(tile, NavConfig::default());
+    let run = with_big_stack(|| {
+        let mut ws = new_workspace();
+        run_frame(
+            &nav,
+            &mut ws,
+            FrameInput::Dem(&frame.heights_m, frame.width, frame.height, pose.pixel_m),
+            None,
+        )
+        .map_err(|e| anyhow!("{e}"))
+    })?;
+    let s = score(&tile, &run, &pose, frame.width, frame.height);
+    super::write_json(&out.join("trn.json"), &s)?;
+    if let Some(ref_slope) = &reference.slope {
+        let fs = frame_slope_deg(&frame);
+        let img = match_picture(
+            (&fs, frame.width, frame.height),
+            (ref_slope.heights_m(), ref_slope.width(), ref_slope.height()),
+            &run.pairs,
+        );
+        let p = out.join("trn.png");
+        img.save(&p)
+            .with_context(|| format!("writing {}", p.display()))?;
+    }
+    Ok(s)
 }
 
 /// Run `ground-sim demo`.
 pub fn run(a: &Args) -> anyhow::Result<()> {
-    let summary = run_demo(&a.out, a.seed)?;
+    let summary = run_demo(a)?;
     let json = a.json.clone().unwrap_or_else(|| a.out.join("demo.json"));
     super::write_json(&json, &summary)?;
     super::write_json(&a.out.join("info.json"), &summary.terrain.stats)?;
-    println!("{:<30} {:>7}  result", "step", "time");
+    println!("{:<32} {:>7}  result", "step", "time");
     for s in &summary.steps {
-        println!("{:<30} {:>6.2}s  {}", s.step, s.seconds, s.result);
+        println!("{:<32} {:>6.2}s  {}", s.step, s.seconds, s.result);
         for f in &s.files {
-            println!("{:<30} {:>7}  -> {}", "", "", f.display());
+            println!("{:<32} {:>7}  -> {}", "", "", f.display());
         }
     }
+    println!("{:<32} {:>6.2}s", "total", summary.total_s);
     super::terrain::print_craters(&summary.terrain.report);
     println!("summary json: {}", json.display());
     Ok(())

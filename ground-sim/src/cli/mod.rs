@@ -6,6 +6,7 @@ pub mod demo;
 pub mod descent;
 pub mod eval;
 pub mod info;
+pub mod insar;
 pub mod register;
 pub mod resample;
 pub mod results;

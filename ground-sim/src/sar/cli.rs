@@ -112,7 +112,7 @@ pub struct SarArgs {
     /// Node spacing of the synthetic DEM (resampled to the mesh spacing), m.
     #[arg(long, default_value_t = 10.0)]
     pub synthetic_pixel_m: f64,
-    /// DEM pixel size when the GeoTIFF has no ModelPixelScale tag, m.
+    /// Override the DEM pixel size taken from the georeferencing, m.
     #[arg(long)]
     pub dem_pixel_m: Option<f64>,
     /// Output directory.
@@ -137,50 +137,24 @@ pub struct PsfArgs {
     pub radar: RadarArgs,
 }
 
-/// Read a single-band GeoTIFF DEM (any integer or float sample type) into a [`SarDem`] with
-/// origin (0, 0). To be replaced by the shared `ground_sim::dem` reader at merge.
+/// Read a single-band GeoTIFF DEM with the shared reader ([`crate::dem::read_geotiff`]) into a
+/// [`SarDem`] (origin (0, 0), rows = azimuth, columns = ground range; nodata filled from
+/// neighbours, see [`SarDem::from_dem`]). `pixel_override` replaces the pixel size taken from
+/// the georeferencing (for grids whose map unit is not the metre).
 pub fn read_geotiff_dem(path: &Path, pixel_override: Option<f64>) -> anyhow::Result<SarDem> {
-    use tiff::decoder::{Decoder, DecodingResult};
-    use tiff::tags::Tag;
-    let file = std::fs::File::open(path).with_context(|| format!("opening {}", path.display()))?;
-    let mut dec = Decoder::new(std::io::BufReader::new(file))?;
-    let (w, h) = dec.dimensions()?;
-    let scale = dec
-        .find_tag(Tag::ModelPixelScaleTag)?
-        .and_then(|v| v.into_f64_vec().ok());
-    let heights: Vec<f32> = match dec.read_image()? {
-        DecodingResult::F32(v) => v,
-        DecodingResult::F64(v) => v.into_iter().map(|x| x as f32).collect(),
-        DecodingResult::I16(v) => v.into_iter().map(f32::from).collect(),
-        DecodingResult::U16(v) => v.into_iter().map(f32::from).collect(),
-        DecodingResult::I32(v) => v.into_iter().map(|x| x as f32).collect(),
-        DecodingResult::U8(v) => v.into_iter().map(f32::from).collect(),
-        _ => bail!("unsupported GeoTIFF sample type"),
-    };
-    let pixel = match (pixel_override, scale) {
-        (Some(p), _) => p,
-        (None, Some(s)) if s.len() >= 2 => {
-            if (s[0] - s[1]).abs() > 1e-6 * s[0].abs() {
-                bail!(
-                    "non-square DEM pixels {}×{} m are not supported",
-                    s[0],
-                    s[1]
-                );
-            }
-            s[0]
-        }
-        _ => bail!("GeoTIFF has no ModelPixelScale tag: pass --dem-pixel-m"),
-    };
-    if heights.len() != (w as usize) * (h as usize) {
-        bail!("expected one band: {} samples for {w}×{h}", heights.len());
+    let dem =
+        crate::dem::read_geotiff(path).with_context(|| format!("reading {}", path.display()))?;
+    let (mut sdem, filled) = SarDem::from_dem(&dem)?;
+    if filled > 0 {
+        eprintln!("SAR: filled {filled} nodata heights from their neighbours");
     }
-    Ok(SarDem::new_checked(
-        w as usize,
-        h as usize,
-        pixel,
-        heights,
-        [0.0, 0.0],
-    )?)
+    if let Some(p) = pixel_override {
+        if !(p.is_finite() && p > 0.0) {
+            bail!("--dem-pixel-m must be > 0");
+        }
+        sdem.pixel_m = p;
+    }
+    Ok(sdem)
 }
 
 /// Run `ground-sim sar`.
@@ -267,34 +241,24 @@ pub fn run_psf(args: PsfArgs) -> anyhow::Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use tiff::encoder::{TiffEncoder, colortype::Gray32Float};
-    use tiff::tags::Tag;
-
-    fn write_dem(path: &Path, w: u32, h: u32, scale: Option<f64>) {
-        let data: Vec<f32> = (0..w * h).map(|i| i as f32 * 0.5 - 3.0).collect();
-        let file = std::fs::File::create(path).unwrap();
-        let mut enc = TiffEncoder::new(file).unwrap();
-        let mut img = enc.new_image::<Gray32Float>(w, h).unwrap();
-        if let Some(s) = scale {
-            img.encoder()
-                .write_tag(Tag::ModelPixelScaleTag, &[s, s, 0.0][..])
-                .unwrap();
-        }
-        img.write_data(&data).unwrap();
-    }
+    use crate::dem::{Dem, GeoRef, write_geotiff};
 
     #[test]
-    fn reads_a_float_geotiff_with_pixel_scale() {
+    fn reads_a_geotiff_with_the_shared_reader() {
         let dir = tempfile::tempdir().unwrap();
         let p = dir.path().join("dem.tif");
-        write_dem(&p, 7, 5, Some(10.0));
-        let dem = read_geotiff_dem(&p, None).unwrap();
-        assert_eq!((dem.width, dem.height, dem.pixel_m), (7, 5, 10.0));
-        assert_eq!(dem.at(1, 2), 9.0 * 0.5 - 3.0);
-        let p2 = dir.path().join("noscale.tif");
-        write_dem(&p2, 4, 4, None);
-        assert!(read_geotiff_dem(&p2, None).is_err());
-        assert_eq!(read_geotiff_dem(&p2, Some(5.0)).unwrap().pixel_m, 5.0);
+        let (w, h) = (7usize, 5usize);
+        let mut z: Vec<f32> = (0..w * h).map(|i| i as f32 * 0.5 - 3.0).collect();
+        z[3] = f32::NAN;
+        let dem = Dem::new(w, h, z, GeoRef::local(100.0, 200.0, 10.0, "t")).unwrap();
+        write_geotiff(&dem, &p, None).unwrap();
+        let s = read_geotiff_dem(&p, None).unwrap();
+        assert_eq!((s.width, s.height, s.pixel_m), (7, 5, 10.0));
+        assert_eq!(s.at(1, 2), 9.0 * 0.5 - 3.0);
+        // The nodata height is filled from its neighbours (2, 4 and 10 → mean).
+        assert!((s.at(0, 3) - (-2.0 + -1.0 + 2.0) / 3.0).abs() < 1e-6);
+        assert_eq!(read_geotiff_dem(&p, Some(5.0)).unwrap().pixel_m, 5.0);
+        assert!(read_geotiff_dem(&dir.path().join("missing.tif"), None).is_err());
     }
 
     #[test]

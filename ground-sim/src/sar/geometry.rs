@@ -77,6 +77,19 @@ impl SarDem {
         })
     }
 
+    /// The radar's view of a georeferenced [`Dem`](crate::dem::Dem): node `(row, col)` = DEM
+    /// pixel `(col, row)`, origin `(0, 0)` (so `x` = rows southwards on a north-up map, the
+    /// flight direction, and `y` = columns eastwards, the look direction), spacing = the DEM's
+    /// square pixel. NaN (nodata) heights are filled from their valid neighbours (repeated
+    /// 4-neighbour means growing inwards); returns the DEM and how many heights were filled.
+    pub fn from_dem(dem: &crate::dem::Dem) -> SarResult<(Self, usize)> {
+        let pixel_m = dem.pixel_m().map_err(|e| SarError::Dem(format!("{e}")))?;
+        let (w, h) = (dem.width(), dem.height());
+        let mut z = dem.heights_m().to_vec();
+        let filled = fill_nodata(&mut z, w, h)?;
+        Ok((Self::new_checked(w, h, pixel_m, z, [0.0, 0.0])?, filled))
+    }
+
     /// Height of node (`row`, `col`), m. Indices must be in range (callers iterate the grid).
     #[inline]
     pub fn at(&self, row: usize, col: usize) -> f64 {
@@ -129,6 +142,61 @@ impl SarDem {
         }
         SarDem::new_checked(w, h, pixel_m, out, self.origin_m)
     }
+}
+
+/// Fill non-finite heights in place from their finite 4-neighbours, layer by layer (each pass
+/// gives every hole touching filled pixels the mean of those neighbours). Returns the count
+/// filled; an all-nodata grid is an error.
+fn fill_nodata(z: &mut [f32], w: usize, h: usize) -> SarResult<usize> {
+    let holes = z.iter().filter(|v| !v.is_finite()).count();
+    if holes == 0 {
+        return Ok(0);
+    }
+    if holes == z.len() {
+        return Err(SarError::Dem("every height is nodata".into()));
+    }
+    let mut left = holes;
+    while left > 0 {
+        let prev = z.to_vec();
+        let mut changed = 0;
+        for r in 0..h {
+            for c in 0..w {
+                let i = r * w + c;
+                if prev[i].is_finite() {
+                    continue;
+                }
+                let mut acc = 0.0f64;
+                let mut n = 0;
+                let mut take = |j: usize| {
+                    if prev[j].is_finite() {
+                        acc += f64::from(prev[j]);
+                        n += 1;
+                    }
+                };
+                if c > 0 {
+                    take(i - 1);
+                }
+                if c + 1 < w {
+                    take(i + 1);
+                }
+                if r > 0 {
+                    take(i - w);
+                }
+                if r + 1 < h {
+                    take(i + w);
+                }
+                if n > 0 {
+                    z[i] = (acc / f64::from(n)) as f32;
+                    changed += 1;
+                }
+            }
+        }
+        if changed == 0 {
+            return Err(SarError::Dem("nodata fill made no progress".into()));
+        }
+        left -= changed;
+    }
+    Ok(holes)
 }
 
 /// One of the two interferometric antennas.
@@ -419,6 +487,26 @@ mod tests {
                 assert!((r.at(row, col) - want).abs() < 1e-5);
             }
         }
+    }
+
+    #[test]
+    fn nodata_is_filled_from_neighbours() {
+        let mut z = vec![
+            1.0,
+            f32::NAN,
+            3.0,
+            f32::NAN,
+            f32::NAN,
+            f32::NAN,
+            7.0,
+            8.0,
+            9.0,
+        ];
+        assert_eq!(fill_nodata(&mut z, 3, 3).unwrap(), 4);
+        assert!(z.iter().all(|v| v.is_finite()));
+        assert_eq!(z[1], 2.0);
+        let mut all = vec![f32::NAN; 4];
+        assert!(fill_nodata(&mut all, 2, 2).is_err());
     }
 
     #[test]

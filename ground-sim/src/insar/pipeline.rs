@@ -1,0 +1,622 @@
+//! The InSAR chain: an SLC pair (or a DEM, through the SAR simulation) to a geocoded DEM with
+//! coherence, height bound and mask.
+
+use std::time::Instant;
+
+use serde::Serialize;
+
+use super::coreg::{
+    ResidualOffset, estimate_residual_offset, predicted_offset_gates, resample_range,
+};
+use super::geocode::{GeocodeParams, OutputGrid, RadarPixels, eq20_mask, geocode, label};
+use super::geometry::{PairGeometry, wrap_rad};
+use super::looks::{LookWindow, equivalent_looks_1d, multilook, phase_crlb_rad};
+use super::unwrap::unwrap_quality_guided;
+use super::{InsarError, InsarResult};
+use crate::dem::Dem;
+use crate::sar::kernel::SincKernel;
+use crate::sar::pipeline::{InsarPair, SimOptions, simulate_with};
+use crate::sar::{Antenna, Polarisation, SarConfig, SarDem, Slc};
+
+/// Processing parameters. Defaults are the paper's (8×8 window, step 4, 20 m) plus our
+/// thresholds, documented in `docs/insar.md`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct InsarConfig {
+    /// Multilook window (paper: 8×8, step 4).
+    pub window: LookWindow,
+    /// Output grid pixel, m (paper: 20).
+    pub pixel_m: f64,
+    /// Coherence below which a pixel's height is dropped (σ_h ≥ 25 m at 0.5 with 21 looks).
+    pub min_coherence: f64,
+    /// Mean radar power this many dB below the scene median = no echo (shadow).
+    pub shadow_below_median_db: f64,
+    /// Unwrap the flat-removed phase (quality-guided). Without it the phase is used wrapped.
+    pub unwrap: bool,
+    /// Search a residual range offset by coherence (a check of the geometric coregistration).
+    pub check_coregistration: bool,
+    /// Geocoding limits.
+    pub geocode: GeocodeParams,
+    /// Standard deviation of a Gaussian filter applied to the geocoded DEM, output pixels
+    /// (0 = none, the paper's processing). Default 1 px: not in the paper; it halves the
+    /// pixel-scale height noise that the slope operator amplifies (measured in
+    /// `docs/insar.md`).
+    pub dem_filter_sigma_px: f64,
+    /// Range sampling rate over the processed bandwidth (SAR default 2), for the looks.
+    pub range_oversampling: f64,
+    /// PRF over the processed Doppler bandwidth (SAR default 2), for the looks.
+    pub azimuth_oversampling: f64,
+    /// Hamming coefficient of the focusing windows (SAR default 0.54), for the looks.
+    pub hamming_alpha: f64,
+}
+
+impl Default for InsarConfig {
+    fn default() -> Self {
+        Self {
+            window: LookWindow::default(),
+            pixel_m: 20.0,
+            min_coherence: 0.5,
+            shadow_below_median_db: 12.0,
+            unwrap: true,
+            check_coregistration: true,
+            geocode: GeocodeParams::default(),
+            dem_filter_sigma_px: 1.0,
+            range_oversampling: 2.0,
+            azimuth_oversampling: 2.0,
+            hamming_alpha: 0.54,
+        }
+    }
+}
+
+impl InsarConfig {
+    /// Take the look-relevant radar values from the SAR configuration that made the SLCs.
+    pub fn with_radar(mut self, sar: &SarConfig) -> Self {
+        self.range_oversampling = sar.range_oversampling;
+        self.azimuth_oversampling = sar.azimuth_oversampling;
+        self.hamming_alpha = sar.hamming_alpha;
+        self
+    }
+
+    fn validate(&self) -> InsarResult<()> {
+        let w = self.window;
+        if w.size == 0 || w.step == 0 || w.step > w.size {
+            return Err(InsarError::Input(format!(
+                "look window {}×{} step {} invalid",
+                w.size, w.size, w.step
+            )));
+        }
+        if !(self.pixel_m > 0.0 && (0.0..1.0).contains(&self.min_coherence)) {
+            return Err(InsarError::Input(
+                "pixel_m must be > 0 and min_coherence in [0, 1)".into(),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Coregistration figures.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct CoregReport {
+    /// Predicted A2 − A1 offset at the first gate, gates.
+    pub offset_near_gates: f64,
+    /// Predicted offset at the last gate, gates.
+    pub offset_far_gates: f64,
+    /// Coherence search around the prediction (if run).
+    pub check: Option<ResidualOffset>,
+}
+
+/// Unwrapping figures.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct UnwrapReport {
+    /// Whether unwrapping ran.
+    pub ran: bool,
+    /// Span of the unwrapped flat-removed phase over good pixels, rad (≥ 2π means wrapping
+    /// was necessary).
+    pub phase_span_rad: f64,
+    /// Height span that phase span stands for (with the centre height of ambiguity), m.
+    pub height_span_m: f64,
+    /// Height of ambiguity at the scene centre, m per 2π.
+    pub ambiguity_height_m: f64,
+    /// Pixels where the unwrapped phase differs from the wrapped one by a multiple of 2π.
+    pub pixels_changed: usize,
+    /// Separate regions grown.
+    pub regions: usize,
+}
+
+/// Fractions of the output grid per mask code.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
+pub struct MaskFractions {
+    /// Valid heights.
+    pub valid: f64,
+    /// Layover.
+    pub layover: f64,
+    /// Shadow.
+    pub shadow: f64,
+    /// Low coherence.
+    pub low_coherence: f64,
+    /// Outside the radar image.
+    pub outside: f64,
+}
+
+impl MaskFractions {
+    fn of(labels: &[u8]) -> Self {
+        let n = labels.len().max(1) as f64;
+        let f = |l: u8| labels.iter().filter(|&&x| x == l).count() as f64 / n;
+        Self {
+            valid: f(label::VALID),
+            layover: f(label::LAYOVER),
+            shadow: f(label::SHADOW),
+            low_coherence: f(label::LOW_COHERENCE),
+            outside: f(label::OUTSIDE),
+        }
+    }
+}
+
+/// Radar-geometry (multilooked) layers, row-major `lines × cols`, for pictures and checks.
+#[derive(Debug, Clone)]
+pub struct RadarLayers {
+    /// Multilooked lines.
+    pub lines: usize,
+    /// Multilooked range columns.
+    pub cols: usize,
+    /// Azimuth spacing of the lines, m.
+    pub line_spacing_m: f64,
+    /// Interferometric phase Δφ0 with the flat-Moon phase (wrapped), rad — Fig. 5a/c.
+    pub phase_with_flat_rad: Vec<f32>,
+    /// Flat-removed phase Δφ (wrapped), rad — Fig. 5b/d.
+    pub phase_rad: Vec<f32>,
+    /// Unwrapped flat-removed phase, rad.
+    pub phase_unwrapped_rad: Vec<f32>,
+    /// Coherence.
+    pub coherence: Vec<f32>,
+    /// Height from eq 17, m (absolute, the DEM's datum).
+    pub height_m: Vec<f32>,
+    /// Ground range of each pixel after parallax correction, m.
+    pub ground_y_m: Vec<f64>,
+    /// Mask code per pixel.
+    pub labels: Vec<u8>,
+}
+
+/// Everything the chain produced for one pair.
+#[derive(Debug, Clone)]
+pub struct InsarProduct {
+    /// Pair geometry.
+    pub geometry: PairGeometry,
+    /// Configuration used.
+    pub config: InsarConfig,
+    /// Output grid.
+    pub grid: OutputGrid,
+    /// Generated DEM on the grid, m (NaN = nodata).
+    pub dem: Dem,
+    /// Coherence on the grid (NaN = nodata).
+    pub coherence: Dem,
+    /// Per-pixel Cramér–Rao height bound on the grid, m (NaN = nodata).
+    pub crlb_m: Dem,
+    /// Mask codes on the grid ([`label`]).
+    pub labels: Vec<u8>,
+    /// Radar-geometry layers.
+    pub radar: RadarLayers,
+    /// Equivalent independent looks of one window.
+    pub effective_looks: f64,
+    /// Coregistration figures.
+    pub coreg: CoregReport,
+    /// Unwrapping figures.
+    pub unwrap: UnwrapReport,
+    /// Mask fractions of the grid.
+    pub mask: MaskFractions,
+    /// Pixels removed by the eq 20 test on the generated DEM.
+    pub eq20_removed: usize,
+    /// Mean coherence of all multilooked radar pixels.
+    pub coherence_mean_radar: f64,
+    /// Processing time, s.
+    pub seconds: f64,
+}
+
+/// Run the InSAR chain on `a1`, `a2` onto `grid`.
+pub fn process_pair(
+    a1: &Slc,
+    a2: &Slc,
+    grid: &OutputGrid,
+    cfg: &InsarConfig,
+) -> InsarResult<InsarProduct> {
+    let t0 = Instant::now();
+    cfg.validate()?;
+    let g = PairGeometry::from_slcs(a1, a2)?;
+    let (lines, gates) = (a1.lines, a1.gates);
+    let w = cfg.window;
+    if w.outputs(lines) < 2 || w.outputs(gates) < 2 {
+        return Err(InsarError::Input(format!(
+            "SLC {lines}×{gates} too small for a {}-pixel window",
+            w.size
+        )));
+    }
+
+    // 1. Range coregistration.
+    let kernel = SincKernel::new();
+    let offset: Vec<f64> = (0..gates)
+        .map(|j| predicted_offset_gates(&g, j as f64))
+        .collect();
+    let a2c = resample_range(&a2.data, lines, gates, &offset, 0.0, &kernel);
+    let check = cfg
+        .check_coregistration
+        .then(|| estimate_residual_offset(&a1.data, &a2.data, lines, gates, &offset, w, &kernel));
+
+    // 2. Interferogram, flat phase removed, multilook, coherence.
+    let flat: Vec<f64> = (0..gates)
+        .map(|j| g.flat_phase_rad(g.range_m(j as f64)))
+        .collect();
+    let looks = multilook(&a1.data, &a2c, lines, gates, &flat, w);
+    let (lo, co) = (looks.lines, looks.gates);
+    let coh = looks.coherence();
+    let wrapped: Vec<f64> = looks.cross.iter().map(|c| c.arg()).collect();
+    let n_win = (w.size * w.size) as f64;
+    let power: Vec<f64> = looks
+        .power1
+        .iter()
+        .zip(&looks.power2)
+        .map(|(a, b)| 0.5 * (a + b) / n_win)
+        .collect();
+    let median_power = {
+        let mut p = power.clone();
+        p.sort_by(f64::total_cmp);
+        p.get(p.len() / 2).copied().unwrap_or(0.0)
+    };
+    let shadow_power = median_power * 10f64.powf(-cfg.shadow_below_median_db / 10.0);
+
+    // 3. Radar-geometry labels: no echo (shadow), then low coherence.
+    let mut labels: Vec<u8> = (0..lo * co)
+        .map(|i| {
+            if power[i] <= shadow_power {
+                label::SHADOW
+            } else if f64::from(coh[i]) < cfg.min_coherence {
+                label::LOW_COHERENCE
+            } else {
+                label::VALID
+            }
+        })
+        .collect();
+
+    // 4. Unwrapping (quality = coherence, masked pixels last).
+    let quality: Vec<f32> = coh
+        .iter()
+        .zip(&labels)
+        .map(|(&c, &l)| if l == label::VALID { c } else { 0.0 })
+        .collect();
+    let centre_r = g.range_m(0.5 * (gates as f64 - 1.0));
+    let hoa = g.ambiguity_height_m(centre_r);
+    let (unw, unwrap) = if cfg.unwrap {
+        let u = unwrap_quality_guided(&wrapped, &quality, co, lo, cfg.min_coherence as f32);
+        let good: Vec<f64> = (0..lo * co)
+            .filter(|&i| labels[i] == label::VALID)
+            .map(|i| u.phase_rad[i])
+            .collect();
+        let span = span(&good);
+        let rep = UnwrapReport {
+            ran: true,
+            phase_span_rad: span,
+            height_span_m: span / std::f64::consts::TAU * hoa,
+            ambiguity_height_m: hoa,
+            pixels_changed: u.pixels_changed,
+            regions: u.regions,
+        };
+        (u.phase_rad, rep)
+    } else {
+        let good: Vec<f64> = (0..lo * co)
+            .filter(|&i| labels[i] == label::VALID)
+            .map(|i| wrapped[i])
+            .collect();
+        let span = span(&good);
+        let rep = UnwrapReport {
+            ran: false,
+            phase_span_rad: span,
+            height_span_m: span / std::f64::consts::TAU * hoa,
+            ambiguity_height_m: hoa,
+            pixels_changed: 0,
+            regions: 0,
+        };
+        (wrapped.clone(), rep)
+    };
+
+    // 5. Heights (eq 17 with each pixel's R1 and θ1), CRLB.
+    let looks_eff = equivalent_looks_1d(w.size, cfg.azimuth_oversampling, cfg.hamming_alpha)
+        * equivalent_looks_1d(w.size, cfg.range_oversampling, cfg.hamming_alpha);
+    let mut z = vec![0.0f64; lo * co];
+    let mut sig = vec![0.0f64; lo * co];
+    for k in 0..lo {
+        for m in 0..co {
+            let i = k * co + m;
+            let r1 = g.range_m(w.centre(m));
+            z[i] = g.datum_m + g.height_m(unw[i], r1);
+            sig[i] = phase_crlb_rad(f64::from(coh[i]), looks_eff) * g.ambiguity_height_m(r1)
+                / std::f64::consts::TAU;
+        }
+    }
+
+    // 6. True ground positions from R1 and the height. The position uses the 3×3 mean height of
+    //    valid neighbours: the parallax is Δz·cot θ ≈ 2Δz, so per-pixel height noise would
+    //    otherwise jitter positions by twice its size and fold neighbours over each other.
+    //    Masked pixels (whose own height is unreliable) take the mean of the nearest valid
+    //    ones, searching up to 8 pixels away, else the datum.
+    let mut gy = vec![0.0f64; lo * co];
+    for k in 0..lo {
+        for m in 0..co {
+            let mut zs = g.datum_m;
+            for radius in [1usize, 2, 4, 8] {
+                let (mut acc, mut n) = (0.0, 0.0);
+                for kk in k.saturating_sub(radius)..(k + radius + 1).min(lo) {
+                    for mm in m.saturating_sub(radius)..(m + radius + 1).min(co) {
+                        let j = kk * co + mm;
+                        if labels[j] == label::VALID {
+                            acc += z[j];
+                            n += 1.0;
+                        }
+                    }
+                }
+                if n > 0.0 {
+                    zs = acc / n;
+                    break;
+                }
+            }
+            gy[k * co + m] = g.ground_y_m(g.range_m(w.centre(m)), zs);
+        }
+    }
+    // Folds (a pixel nearer on the ground than one before it by more than a quarter of the
+    // nominal ground spacing) are layover; smaller reversals are noise and are clamped so that
+    // each line's positions never decrease.
+    let fold_tol = 0.25 * g.range_spacing_m * w.step as f64 / g.flat_look_angle_rad(centre_r).sin();
+    for k in 0..lo {
+        let row = k * co;
+        let mut run_max = f64::NEG_INFINITY;
+        for m in 0..co {
+            let i = row + m;
+            if labels[i] != label::VALID {
+                continue;
+            }
+            if gy[i] < run_max - fold_tol {
+                labels[i] = label::LAYOVER;
+                for mm in (0..m).rev() {
+                    let j = row + mm;
+                    if gy[j] > gy[i] {
+                        labels[j] = label::LAYOVER;
+                    } else if labels[j] == label::VALID {
+                        break;
+                    }
+                }
+            } else {
+                gy[i] = gy[i].max(run_max);
+                run_max = gy[i];
+            }
+        }
+    }
+
+    // 7. Geometric correction onto the grid, then eq 20 on the generated DEM.
+    let coh64: Vec<f64> = coh.iter().map(|&c| f64::from(c)).collect();
+    let radar = RadarPixels {
+        lines: lo,
+        cols: co,
+        x0_m: g.azimuth_m(w.centre(0)),
+        dx_m: g.azimuth_spacing_m * w.step as f64,
+        ground_y_m: &gy,
+        labels: &labels,
+    };
+    let geo = geocode(&radar, &[&z, &coh64, &sig], grid, &cfg.geocode);
+    let mut out_labels = geo.labels;
+    let mut heights = geo.channels[0].clone();
+    let eq20_removed = eq20_mask(&heights, &mut out_labels, grid, g.a1_yz_m);
+    for (h, &l) in heights.iter_mut().zip(&out_labels) {
+        if l != label::VALID {
+            *h = f64::NAN;
+        }
+    }
+    let masked = |ch: &[f64]| -> Vec<f32> {
+        ch.iter()
+            .zip(&out_labels)
+            .map(|(&v, &l)| {
+                if l == label::VALID {
+                    v as f32
+                } else {
+                    f32::NAN
+                }
+            })
+            .collect()
+    };
+    if cfg.dem_filter_sigma_px > 0.0 {
+        heights = gaussian_filter(&heights, grid.width, grid.height, cfg.dem_filter_sigma_px);
+    }
+    let dem = grid.raster(masked(&heights))?;
+    let coherence = grid.raster(masked(&geo.channels[1]))?;
+    let crlb_m = grid.raster(masked(&geo.channels[2]))?;
+    let mask = MaskFractions::of(&out_labels);
+    let coherence_mean_radar = coh64.iter().sum::<f64>() / coh64.len().max(1) as f64;
+
+    let radar_layers = RadarLayers {
+        lines: lo,
+        cols: co,
+        line_spacing_m: radar.dx_m,
+        phase_with_flat_rad: looks.cross_raw.iter().map(|c| c.arg() as f32).collect(),
+        phase_rad: wrapped.iter().map(|&p| wrap_rad(p) as f32).collect(),
+        phase_unwrapped_rad: unw.iter().map(|&p| p as f32).collect(),
+        coherence: coh,
+        height_m: z.iter().map(|&v| v as f32).collect(),
+        ground_y_m: gy,
+        labels,
+    };
+    Ok(InsarProduct {
+        geometry: g,
+        config: *cfg,
+        grid: grid.clone(),
+        dem,
+        coherence,
+        crlb_m,
+        labels: out_labels,
+        radar: radar_layers,
+        effective_looks: looks_eff,
+        coreg: CoregReport {
+            offset_near_gates: offset.first().copied().unwrap_or(0.0),
+            offset_far_gates: offset.last().copied().unwrap_or(0.0),
+            check,
+        },
+        unwrap,
+        mask,
+        eq20_removed,
+        coherence_mean_radar,
+        seconds: t0.elapsed().as_secs_f64(),
+    })
+}
+
+/// Gaussian filter of standard deviation `sigma_px` (kernel cut at 3σ) over the finite values
+/// of a `w × h` grid, normalised by the weights that fell on finite values; NaN stays NaN.
+pub fn gaussian_filter(z: &[f64], w: usize, h: usize, sigma_px: f64) -> Vec<f64> {
+    let r = (3.0 * sigma_px).ceil() as usize;
+    let k: Vec<f64> = (0..=2 * r)
+        .map(|i| {
+            let d = i as f64 - r as f64;
+            (-d * d / (2.0 * sigma_px * sigma_px)).exp()
+        })
+        .collect();
+    // Separable: rows, then columns, each carrying (Σ k·z, Σ k) so holes renormalise.
+    let pass = |src: &[(f64, f64)], horizontal: bool| -> Vec<(f64, f64)> {
+        let mut out = vec![(0.0, 0.0); w * h];
+        for y in 0..h {
+            for x in 0..w {
+                let (mut a, mut b) = (0.0, 0.0);
+                for (i, &kk) in k.iter().enumerate() {
+                    let d = i as i64 - r as i64;
+                    let (xx, yy) = if horizontal {
+                        (x as i64 + d, y as i64)
+                    } else {
+                        (x as i64, y as i64 + d)
+                    };
+                    if xx < 0 || yy < 0 || xx >= w as i64 || yy >= h as i64 {
+                        continue;
+                    }
+                    let (v, wt) = src[yy as usize * w + xx as usize];
+                    a += kk * v;
+                    b += kk * wt;
+                }
+                out[y * w + x] = (a, b);
+            }
+        }
+        out
+    };
+    let init: Vec<(f64, f64)> = z
+        .iter()
+        .map(|&v| if v.is_finite() { (v, 1.0) } else { (0.0, 0.0) })
+        .collect();
+    let out = pass(&pass(&init, true), false);
+    out.iter()
+        .zip(z)
+        .map(|(&(a, b), &v)| {
+            if v.is_finite() && b > 0.0 {
+                a / b
+            } else {
+                f64::NAN
+            }
+        })
+        .collect()
+}
+
+fn span(v: &[f64]) -> f64 {
+    let (lo, hi) = v
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
+            (a.min(x), b.max(x))
+        });
+    if hi >= lo { hi - lo } else { 0.0 }
+}
+
+/// The truth on the product's grid, two ways.
+#[derive(Debug, Clone)]
+pub struct TruthOnGrid {
+    /// The truth resampled to the output grid (block mean for integer ratios): the reference
+    /// the accuracy requirements are stated against.
+    pub grid: Dem,
+    /// The truth averaged over the multilook window's ground footprint centred on each pixel
+    /// (a diagnostic separating noise from the product's coarser resolution).
+    pub window: Dem,
+    /// Side of that footprint, m.
+    pub window_side_m: f64,
+}
+
+/// One run of the whole chain from a DEM: SAR simulation, InSAR, grid aligned with the truth.
+#[derive(Debug, Clone)]
+pub struct ChainRun {
+    /// The SAR simulation (SLCs, geometry, timings).
+    pub pair: InsarPair,
+    /// Heights filled before the SAR simulation (nodata in the input DEM).
+    pub filled_nodata: usize,
+    /// The truth on the output grid.
+    pub truth: TruthOnGrid,
+    /// The InSAR product.
+    pub product: InsarProduct,
+}
+
+/// Simulate the radar over `truth` with `sar` (only the channel `pol`), then run the InSAR
+/// chain onto the truth's grid at `cfg.pixel_m`.
+pub fn run_from_dem(
+    truth: &Dem,
+    sar: &SarConfig,
+    pol: Polarisation,
+    cfg: &InsarConfig,
+    progress: bool,
+) -> anyhow::Result<ChainRun> {
+    let (sdem, filled) = SarDem::from_dem(truth)?;
+    let mut sar = sar.clone();
+    sar.polarisations = vec![pol];
+    let opts = SimOptions {
+        progress,
+        ..SimOptions::default()
+    };
+    let pair = simulate_with(&sdem, &sar, &opts)?;
+    let cfg = cfg.with_radar(&sar);
+    let (truth_on_grid, product) = process_simulated(truth, &pair, pol, &cfg)?;
+    Ok(ChainRun {
+        pair,
+        filled_nodata: filled,
+        truth: truth_on_grid,
+        product,
+    })
+}
+
+/// The InSAR chain on an already simulated pair of `truth`; returns the truth on the output
+/// grid and the product.
+pub fn process_simulated(
+    truth: &Dem,
+    pair: &InsarPair,
+    pol: Polarisation,
+    cfg: &InsarConfig,
+) -> anyhow::Result<(TruthOnGrid, InsarProduct)> {
+    let a1 = pair
+        .slc(Antenna::A1, pol)
+        .ok_or_else(|| anyhow::anyhow!("no A1 {} SLC", pol.tag()))?;
+    let a2 = pair
+        .slc(Antenna::A2, pol)
+        .ok_or_else(|| anyhow::anyhow!("no A2 {} SLC", pol.tag()))?;
+    process_slcs(truth, a1, a2, cfg)
+}
+
+/// The InSAR chain on two SLCs simulated from `truth` (the grid and the truth comparison come
+/// from it); returns the truth on the output grid and the product.
+pub fn process_slcs(
+    truth: &Dem,
+    a1: &Slc,
+    a2: &Slc,
+    cfg: &InsarConfig,
+) -> anyhow::Result<(TruthOnGrid, InsarProduct)> {
+    let truth_grid = crate::reference::reference_dem(truth, cfg.pixel_m)?;
+    let grid = OutputGrid::aligned(truth, &truth_grid)?;
+    let product = process_pair(a1, a2, &grid, cfg)?;
+    let g = &product.geometry;
+    let centre_r = g.range_m(0.5 * (a1.gates as f64 - 1.0));
+    let n = cfg.window.size as f64;
+    let side = 0.5
+        * (n * g.azimuth_spacing_m + n * g.range_spacing_m / g.flat_look_angle_rad(centre_r).sin());
+    let window = super::accuracy::window_truth(truth, &truth_grid, side)?;
+    Ok((
+        TruthOnGrid {
+            grid: truth_grid,
+            window,
+            window_side_m: side,
+        },
+        product,
+    ))
+}

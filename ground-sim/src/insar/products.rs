@@ -1,0 +1,351 @@
+//! What `ground-sim insar` writes into its folder: the reference folder of
+//! [`crate::reference`] (tile.bin, slope.tif, reference-dem.tif = the InSAR DEM, tile.json),
+//! further GeoTIFFs (coherence, mask codes of [`super::label`], height bound, height error), the paper's Fig. 5 and 6
+//! pictures and `report.json`.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+use nav_core::SurfConfig;
+use serde::Serialize;
+
+use super::accuracy::{Accuracy, compare};
+use super::geometry::PairGeometry;
+use super::pipeline::{
+    CoregReport, InsarConfig, InsarProduct, MaskFractions, TruthOnGrid, UnwrapReport,
+};
+use crate::analysis::slope_deg;
+use crate::dem::{Dem, SampleKind, write_geotiff};
+use crate::reference::{TileSummary, write_reference};
+use crate::render::{ColourMap, RasterStyle, raster_image};
+use crate::sar::pipeline::{InsarPair, Timings};
+use crate::sar::{Derived, SarConfig};
+use crate::tile::MAX_TILE_FEATURES;
+
+/// Coherence GeoTIFF.
+pub const COHERENCE_FILE: &str = "coherence.tif";
+/// Mask GeoTIFF (uint16 codes of [`super::label`]).
+pub const MASK_FILE: &str = "mask.tif";
+/// Per-pixel Cramér–Rao height bound GeoTIFF, m.
+pub const CRLB_FILE: &str = "height-crlb.tif";
+/// InSAR minus truth GeoTIFF, m.
+pub const ERROR_FILE: &str = "height-error.tif";
+/// The truth on the output grid (block mean), m.
+pub const TRUTH_FILE: &str = "truth-dem.tif";
+/// The truth averaged over the multilook window's footprint, m.
+pub const TRUTH_WINDOW_FILE: &str = "truth-window-dem.tif";
+/// Report file.
+pub const REPORT_FILE: &str = "report.json";
+
+/// The SAR part of the report (when the chain simulated the radar itself).
+#[derive(Debug, Clone, Serialize)]
+pub struct SarSummary {
+    /// Radar configuration.
+    pub config: SarConfig,
+    /// Derived radar values.
+    pub derived: Derived,
+    /// SAR stage timings, s.
+    pub timings: Timings,
+    /// Facets in the mesh / shadowed / layover (the simulator's own geometric flags).
+    pub facets: [usize; 3],
+}
+
+impl SarSummary {
+    /// Summary of a simulated pair.
+    pub fn of(pair: &InsarPair) -> Self {
+        Self {
+            config: pair.config.clone(),
+            derived: pair.derived.clone(),
+            timings: pair.timings.clone(),
+            facets: [pair.stats.facets, pair.stats.shadowed, pair.stats.layover],
+        }
+    }
+}
+
+/// `report.json`: the accuracy figures at the top level, then the details.
+#[derive(Debug, Clone, Serialize)]
+pub struct InsarReport {
+    /// Height, slope, validity, coherence and CRLB figures.
+    #[serde(flatten)]
+    pub accuracy: Accuracy,
+    /// SURF features in the reference tile.
+    pub tile_features: usize,
+    /// The reference tile summary.
+    pub tile: TileSummary,
+    /// Equivalent independent looks of one multilook window.
+    pub effective_looks: f64,
+    /// Height of ambiguity at the scene centre, m per 2π.
+    pub height_of_ambiguity_m: f64,
+    /// Mean coherence of every multilooked radar pixel (masked ones included).
+    pub coherence_mean_radar: f64,
+    /// Coregistration figures.
+    pub coregistration: CoregReport,
+    /// Unwrapping figures.
+    pub unwrap: UnwrapReport,
+    /// Fractions of the output grid per mask code.
+    pub mask: MaskFractions,
+    /// Pixels removed by the eq 20 test on the generated DEM.
+    pub eq20_removed_pixels: usize,
+    /// Output grid size and pixel.
+    pub grid: [f64; 3],
+    /// Pair geometry.
+    pub geometry: PairGeometry,
+    /// Processing configuration.
+    pub config: InsarConfig,
+    /// Radar simulation, if run by this command.
+    pub sar: Option<SarSummary>,
+    /// Input DEM file, if any.
+    pub input_dem: Option<String>,
+    /// Nodata heights filled before the radar simulation.
+    pub filled_nodata: usize,
+    /// InSAR processing time, s.
+    pub insar_s: f64,
+    /// Time to write the products, s.
+    pub products_s: f64,
+    /// Files written (relative to the folder).
+    pub files: Vec<String>,
+}
+
+/// Context of the run for the report.
+#[derive(Debug, Clone, Default)]
+pub struct RunContext {
+    /// Radar simulation summary.
+    pub sar: Option<SarSummary>,
+    /// Input DEM path.
+    pub input_dem: Option<PathBuf>,
+    /// Nodata heights filled before the radar simulation.
+    pub filled_nodata: usize,
+}
+
+fn save(img: &image::RgbImage, path: &Path) -> anyhow::Result<()> {
+    img.save(path)
+        .with_context(|| format!("writing {}", path.display()))
+}
+
+/// Write every product of `p` into `dir` (compared with `truth`), return the report.
+pub fn write_outputs(
+    dir: &Path,
+    p: &InsarProduct,
+    truth: &TruthOnGrid,
+    ctx: &RunContext,
+) -> anyhow::Result<InsarReport> {
+    let t = std::time::Instant::now();
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let truth_grid = &truth.grid;
+    let accuracy = compare(p, truth_grid, Some(&truth.window))?;
+    let tile = write_reference(&p.dem, dir, &SurfConfig::default(), MAX_TILE_FEATURES)
+        .context("building the reference tile")?;
+    let mut files: Vec<String> = [
+        crate::reference::TILE_FILE,
+        crate::reference::SLOPE_FILE,
+        crate::reference::DEM_FILE,
+        crate::reference::META_FILE,
+    ]
+    .iter()
+    .map(|s| s.to_string())
+    .collect();
+    let tif = |dem: &Dem, name: &str, kind: SampleKind, files: &mut Vec<String>| {
+        let path = dir.join(name);
+        write_geotiff(dem, &path, Some(kind)).with_context(|| format!("writing {name}"))?;
+        files.push(name.to_string());
+        anyhow::Ok(())
+    };
+    tif(&p.coherence, COHERENCE_FILE, SampleKind::F32, &mut files)?;
+    tif(&p.crlb_m, CRLB_FILE, SampleKind::F32, &mut files)?;
+    let mask = p
+        .grid
+        .raster(p.labels.iter().map(|&l| f32::from(l)).collect())?;
+    tif(&mask, MASK_FILE, SampleKind::U16, &mut files)?;
+    let err: Vec<f32> = p
+        .dem
+        .heights_m()
+        .iter()
+        .zip(truth_grid.heights_m())
+        .map(|(a, b)| a - b)
+        .collect();
+    let err_dem = p.grid.raster(err.clone())?;
+    tif(&err_dem, ERROR_FILE, SampleKind::F32, &mut files)?;
+    tif(truth_grid, TRUTH_FILE, SampleKind::F32, &mut files)?;
+    tif(
+        &truth.window,
+        TRUTH_WINDOW_FILE,
+        SampleKind::F32,
+        &mut files,
+    )?;
+
+    // Pictures. Radar geometry: rows = azimuth, columns = slant range (near range left), one
+    // pixel per multilook window (≈ 20 m × 20 m on the ground).
+    let r = &p.radar;
+    let pi = std::f64::consts::PI;
+    let mut png = |img: image::RgbImage, name: &str| -> anyhow::Result<()> {
+        save(&img, &dir.join(name))?;
+        files.push(name.to_string());
+        Ok(())
+    };
+    let radar_px = r.line_spacing_m;
+    png(
+        raster_image(
+            &r.phase_with_flat_rad,
+            r.cols,
+            r.lines,
+            radar_px,
+            &RasterStyle {
+                title: "Fig 5a: phase with flat-Moon term",
+                map: ColourMap::Phase,
+                range: (-pi, pi),
+                unit: "rad",
+            },
+        ),
+        "fig5a-phase-with-flat.png",
+    )?;
+    png(
+        raster_image(
+            &r.phase_rad,
+            r.cols,
+            r.lines,
+            radar_px,
+            &RasterStyle {
+                title: "Fig 5b: phase, flat-Moon term removed",
+                map: ColourMap::Phase,
+                range: (-pi, pi),
+                unit: "rad",
+            },
+        ),
+        "fig5b-phase-flat-removed.png",
+    )?;
+    png(
+        raster_image(
+            &r.coherence,
+            r.cols,
+            r.lines,
+            radar_px,
+            &RasterStyle {
+                title: "coherence (radar geometry)",
+                map: ColourMap::Grey,
+                range: (0.0, 1.0),
+                unit: "",
+            },
+        ),
+        "coherence-radar.png",
+    )?;
+    let (w, h) = (p.grid.width, p.grid.height);
+    let (zlo, zhi) = truth_grid
+        .heights_m()
+        .iter()
+        .filter(|v| v.is_finite())
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+            (a.min(f64::from(v)), b.max(f64::from(v)))
+        });
+    let zr = if zhi > zlo {
+        (zlo, zhi)
+    } else {
+        (zlo - 1.0, zlo + 1.0)
+    };
+    let slope_range = crate::render::SLOPE_RANGE_DEG;
+    for (dem, name, what) in [
+        (&p.dem, "fig6a-insar-dem.png", "Fig 6a: InSAR DEM"),
+        (truth_grid, "truth-dem.png", "truth DEM at the same grid"),
+    ] {
+        png(
+            raster_image(
+                dem.heights_m(),
+                w,
+                h,
+                p.grid.pixel_m,
+                &RasterStyle {
+                    title: what,
+                    map: ColourMap::Elevation,
+                    range: zr,
+                    unit: "m",
+                },
+            ),
+            name,
+        )?;
+    }
+    for (dem, name, what) in [
+        (&p.dem, "fig6b-insar-slope.png", "Fig 6b: InSAR slope"),
+        (
+            truth_grid,
+            "truth-slope.png",
+            "truth slope at the same grid",
+        ),
+    ] {
+        png(
+            raster_image(
+                &slope_deg(dem)?,
+                w,
+                h,
+                p.grid.pixel_m,
+                &RasterStyle {
+                    title: what,
+                    map: ColourMap::Slope,
+                    range: slope_range,
+                    unit: "deg",
+                },
+            ),
+            name,
+        )?;
+    }
+    let lim = (3.0 * accuracy.height_rmse_m).max(1.0);
+    png(
+        raster_image(
+            &err,
+            w,
+            h,
+            p.grid.pixel_m,
+            &RasterStyle {
+                title: "InSAR - truth",
+                map: ColourMap::Diverging,
+                range: (-lim, lim),
+                unit: "m",
+            },
+        ),
+        "height-error.png",
+    )?;
+    let labels: Vec<f32> = p.labels.iter().map(|&l| f32::from(l)).collect();
+    png(
+        raster_image(
+            &labels,
+            w,
+            h,
+            p.grid.pixel_m,
+            &RasterStyle {
+                title: "mask: 0 ok 1 layover 2 shadow 3 low coh 4 out",
+                map: ColourMap::Mask,
+                range: (0.0, 4.0),
+                unit: "",
+            },
+        ),
+        "mask.png",
+    )?;
+    let products_s = t.elapsed().as_secs_f64();
+    let report = InsarReport {
+        accuracy,
+        tile_features: tile.features,
+        tile,
+        effective_looks: p.effective_looks,
+        height_of_ambiguity_m: p.unwrap.ambiguity_height_m,
+        coherence_mean_radar: p.coherence_mean_radar,
+        coregistration: p.coreg,
+        unwrap: p.unwrap,
+        mask: p.mask,
+        eq20_removed_pixels: p.eq20_removed,
+        grid: [w as f64, h as f64, p.grid.pixel_m],
+        geometry: p.geometry,
+        config: p.config,
+        sar: ctx.sar.clone(),
+        input_dem: ctx.input_dem.as_ref().map(|p| p.display().to_string()),
+        filled_nodata: ctx.filled_nodata,
+        insar_s: p.seconds,
+        products_s,
+        files: {
+            let mut f = files;
+            f.push(REPORT_FILE.to_string());
+            f
+        },
+    };
+    let text = serde_json::to_string_pretty(&report)? + "\n";
+    std::fs::write(dir.join(REPORT_FILE), text)
+        .with_context(|| format!("writing {}", dir.join(REPORT_FILE).display()))?;
+    Ok(report)
+}
