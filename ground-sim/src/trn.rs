@@ -137,3 +137,47 @@ fn fill_fix(
     }
     s.false_fix = ce > 3.0;
 }
+
+/// One synthetic frame flown through the onboard chain and scored (what `trn` and `demo` do).
+pub struct FrameCheck {
+    /// The synthesised frame.
+    pub frame: crate::frames::Frame,
+    /// The onboard result.
+    pub run: FrameRun,
+    /// Its scores against the truth.
+    pub score: TrnScore,
+}
+
+/// Synthesise the frame at `pose` from `dem`, locate it against `tile` with the default
+/// navigator settings (no prior) and score it.
+pub fn check_frame(
+    dem: &crate::dem::Dem,
+    tile: &Tile<'_>,
+    pose: &FramePose,
+    sensor: &crate::frames::SensorModel,
+    seed: u64,
+) -> anyhow::Result<FrameCheck> {
+    use crate::onboard::{FrameInput, new_workspace, run_frame, with_big_stack};
+    let frame = crate::frames::synth_frame(dem, pose, sensor, seed)?;
+    let nav = nav_core::Navigator::new(*tile, nav_core::NavConfig::default());
+    let run = with_big_stack(|| {
+        let mut ws = new_workspace();
+        let input = FrameInput::Dem(&frame.heights_m, frame.width, frame.height, pose.pixel_m);
+        run_frame(&nav, &mut ws, input, None).map_err(|e| anyhow::anyhow!("{e}"))
+    })?;
+    let score = score(tile, &run, pose, frame.width, frame.height);
+    Ok(FrameCheck { frame, run, score })
+}
+
+impl FrameCheck {
+    /// The paper's Fig. 7 picture: this frame's slope (left) and the reference slope map
+    /// (degrees, right) with the match lines.
+    pub fn picture(&self, ref_slope: &crate::dem::Dem) -> image::RgbImage {
+        let fs = crate::frames::frame_slope_deg(&self.frame);
+        crate::matchplot::match_picture(
+            (&fs, self.frame.width, self.frame.height),
+            (ref_slope.heights_m(), ref_slope.width(), ref_slope.height()),
+            &self.run.pairs,
+        )
+    }
+}

@@ -16,20 +16,18 @@ use std::time::Instant;
 
 use anyhow::{Context, anyhow};
 use ground_sim::dem::SampleKind;
-use ground_sim::frames::{FramePose, SensorModel, frame_slope_deg, synth_frame};
+use ground_sim::frames::{FramePose, SensorModel};
 use ground_sim::insar::InsarConfig;
 use ground_sim::insar::pipeline::process_simulated;
 use ground_sim::insar::products::{InsarReport, RunContext, SarSummary, write_outputs};
-use ground_sim::matchplot::match_picture;
-use ground_sim::onboard::{FrameInput, new_workspace, run_frame, with_big_stack};
 use ground_sim::reference::load;
 use ground_sim::sar::SarDem;
 use ground_sim::sar::cli::RadarArgs;
 use ground_sim::sar::pipeline::{SimOptions, simulate_with};
 use ground_sim::sar::products::write_products;
 use ground_sim::terrain::{Preset, TerrainParams};
-use ground_sim::trn::{TrnScore, score};
-use nav_core::{NavConfig, Navigator, Tile};
+use ground_sim::trn::{TrnScore, check_frame};
+use nav_core::Tile;
 
 /// Arguments of `ground-sim demo`.
 #[derive(Debug, clap::Args)]
@@ -251,27 +249,11 @@ fn trn_check(
         pixel_m: 10.0,
     };
     let sensor = SensorModel::default();
-    let frame = synth_frame(truth, &pose, &sensor, 1)?;
-    let nav = Navigator::new(tile, NavConfig::default());
-    let run = with_big_stack(|| {
-        let mut ws = new_workspace();
-        run_frame(
-            &nav,
-            &mut ws,
-            FrameInput::Dem(&frame.heights_m, frame.width, frame.height, pose.pixel_m),
-            None,
-        )
-        .map_err(|e| anyhow!("{e}"))
-    })?;
-    let s = score(&tile, &run, &pose, frame.width, frame.height);
+    let check = check_frame(truth, &tile, &pose, &sensor, 1)?;
+    let s = check.score.clone();
     super::write_json(&out.join("trn.json"), &s)?;
     if let Some(ref_slope) = &reference.slope {
-        let fs = frame_slope_deg(&frame);
-        let img = match_picture(
-            (&fs, frame.width, frame.height),
-            (ref_slope.heights_m(), ref_slope.width(), ref_slope.height()),
-            &run.pairs,
-        );
+        let img = check.picture(ref_slope);
         let p = out.join("trn.png");
         img.save(&p)
             .with_context(|| format!("writing {}", p.display()))?;

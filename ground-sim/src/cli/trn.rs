@@ -4,12 +4,10 @@ use std::path::PathBuf;
 
 use anyhow::{Context, anyhow};
 use ground_sim::dem::read_geotiff;
-use ground_sim::frames::{FramePose, SensorModel, synth_frame};
-use ground_sim::matchplot::match_picture;
-use ground_sim::onboard::{FrameInput, new_workspace, run_frame, with_big_stack};
+use ground_sim::frames::{FramePose, SensorModel};
 use ground_sim::reference::load;
-use ground_sim::trn::score;
-use nav_core::{NavConfig, Navigator, Tile};
+use ground_sim::trn::check_frame;
+use nav_core::Tile;
 
 /// Arguments of `ground-sim trn`.
 #[derive(Debug, clap::Args)]
@@ -79,19 +77,8 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         dropout_frac: a.dropout,
         ..SensorModel::default()
     };
-    let frame = synth_frame(&dem, &pose, &sensor, a.seed)?;
-    let nav = Navigator::new(tile, NavConfig::default());
-    let run = with_big_stack(|| {
-        let mut ws = new_workspace();
-        run_frame(
-            &nav,
-            &mut ws,
-            FrameInput::Dem(&frame.heights_m, frame.width, frame.height, a.pixel_m),
-            None,
-        )
-        .map_err(|e| anyhow!("{e}"))
-    })?;
-    let s = score(&tile, &run, &pose, frame.width, frame.height);
+    let check = check_frame(&dem, &tile, &pose, &sensor, a.seed)?;
+    let (frame, run, s) = (&check.frame, &check.run, &check.score);
     println!(
         "frame      {}x{} px at {} m, heading {:.1}°, centre ({:.1}, {:.1}) m",
         frame.width, frame.height, a.pixel_m, a.heading_deg, pose.x_m, pose.y_m
@@ -99,7 +86,7 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
     println!(
         "features   {} frame, {} tile; matches {}, inliers {}",
         s.features,
-        nav.tile().len(),
+        tile.len(),
         s.matches,
         s.inliers
     );
@@ -126,30 +113,19 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
     }
     println!("time       {:.2} ms", s.time_ms);
     if let Some(j) = &a.json {
-        super::write_json(j, &s)?;
+        super::write_json(j, s)?;
         println!("json       {}", j.display());
     }
     if let Some(dir) = &a.export {
-        export(
-            dir,
-            &frame,
-            reference.slope.as_ref(),
-            nav.tile().header(),
-            &pose,
-        )?;
+        export(dir, frame, reference.slope.as_ref(), tile.header(), &pose)?;
         println!("export     {}", dir.display());
     }
     if let Some(p) = &a.png {
-        let fs = ground_sim::frames::frame_slope_deg(&frame);
         let ref_slope = reference
             .slope
             .as_ref()
             .ok_or_else(|| anyhow!("{} has no slope.tif for the picture", a.tile.display()))?;
-        let img = match_picture(
-            (&fs, frame.width, frame.height),
-            (ref_slope.heights_m(), ref_slope.width(), ref_slope.height()),
-            &run.pairs,
-        );
+        let img = check.picture(ref_slope);
         super::ensure_parent(p)?;
         img.save(p)
             .with_context(|| format!("writing {}", p.display()))?;
