@@ -53,12 +53,15 @@ pub fn tile_features(
 }
 
 /// Build a tile blob from a slope image: features by nav-core (the strongest `max_features`, at
-/// most [`MAX_TILE_FEATURES`]), header from `grid` and `cfg`.
+/// most [`MAX_TILE_FEATURES`]), header from `grid`, `cfg` and the terrain smoothing σ the slope
+/// carries (`smoothing_m`, metres; see `nav_core::TileHeader::smoothing_m`; 0 for slope images
+/// that frames will be compared with as they are).
 pub fn build_tile(
     slope: &SlopeImage<'_>,
     grid: &GeoGrid,
     cfg: &SurfConfig,
     max_features: usize,
+    smoothing_m: f64,
 ) -> Result<Vec<u8>> {
     let all = tile_features(slope, cfg)?;
     let feats = &all.as_slice()[..all.len().min(max_features)];
@@ -82,6 +85,7 @@ pub fn build_tile(
         threshold: cfg.detector.threshold,
         min_scale_px: cfg.detector.min_scale_px,
         upright: cfg.upright,
+        smoothing_m: smoothing_m as f32,
     };
     let mut buf = vec![0u8; tile_len(MAX_HEADER_LEN, feats.len())];
     let len = write_tile(&header, feats, &mut buf)

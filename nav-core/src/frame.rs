@@ -308,6 +308,23 @@ impl<const MAX_PX: usize> SlopeBuffer<MAX_PX> {
         Ok(img)
     }
 
+    /// Slope of `dem` binned `k × k` and smoothed by a Gaussian of `sigma_px` binned pixels
+    /// (see [`crate::slope::slope_into_binned_smoothed`]; binned rows at most `CAP` wide).
+    pub fn compute_binned_smoothed<const CAP: usize>(
+        &mut self,
+        dem: &DemPatch<'_>,
+        k: usize,
+        sigma_px: f32,
+        fill: bool,
+    ) -> Result<SlopeImage<'_>, FrameError> {
+        let img =
+            crate::slope::slope_into_binned_smoothed::<CAP>(dem, k, sigma_px, &mut self.px, fill)?;
+        self.width = img.width();
+        self.height = img.height();
+        self.pixel_m = img.pixel_m();
+        Ok(img)
+    }
+
     /// Slope of `dem` binned `k × k` (see [`crate::slope::slope_into_binned`]).
     pub fn compute_binned(
         &mut self,

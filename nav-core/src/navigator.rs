@@ -62,6 +62,10 @@ pub struct NavConfig {
     /// slopes then see the same scale of terrain, keypoints land more consistently, and the
     /// frame has k² times fewer pixels to process. Keypoints and the fix stay in frame pixels.
     pub bin_to_tile: bool,
+    /// Smooth DEM frames (after binning) by the tile's [`crate::TileHeader::smoothing_m`], so
+    /// frame and reference slopes come from terrain at the same resolution. Slope-image frames
+    /// cannot be smoothed this way and are used as given.
+    pub match_tile_smoothing: bool,
 }
 
 impl Default for NavConfig {
@@ -76,6 +80,7 @@ impl Default for NavConfig {
             guided_max_ssd: 1.0,
             fill_dropouts: true,
             bin_to_tile: true,
+            match_tile_smoothing: true,
         }
     }
 }
@@ -232,6 +237,18 @@ impl<'t> Navigator<'t> {
         }
     }
 
+    /// Gaussian σ, in pixels of `binned_pixel_m` metres, by which a DEM frame is smoothed to
+    /// match the tile (0 when the tile is unsmoothed or [`NavConfig::match_tile_smoothing`] is
+    /// off).
+    pub fn frame_smoothing_px(&self, binned_pixel_m: f32) -> f32 {
+        let s = self.tile.header().smoothing_m;
+        if self.cfg.match_tile_smoothing && s > 0.0 && binned_pixel_m > 0.0 {
+            s / binned_pixel_m
+        } else {
+            0.0
+        }
+    }
+
     /// SURF settings for a frame of `frame_pixel_m` metres per pixel: the tile's, with the
     /// minimum scale raised for frames finer than the tile.
     pub fn frame_surf_config(&self, frame_pixel_m: f32) -> SurfConfig {
@@ -264,8 +281,9 @@ impl<'t> Navigator<'t> {
             ..
         } = ws;
         let k = self.bin_factor(dem.pixel_m());
-        let img = if k > 1 {
-            slope.compute_binned(dem, k, self.cfg.fill_dropouts)?
+        let sigma_px = self.frame_smoothing_px(dem.pixel_m() * k as f32);
+        let img = if k > 1 || sigma_px > 0.0 {
+            slope.compute_binned_smoothed::<W>(dem, k, sigma_px, self.cfg.fill_dropouts)?
         } else if self.cfg.fill_dropouts {
             slope.compute_from_filled(dem)?
         } else {

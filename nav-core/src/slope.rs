@@ -53,9 +53,49 @@ pub const MAX_BIN: usize = 8;
 /// flyer bring a frame finer than the reference to the reference's ground sample distance
 /// before SURF, so both images' slopes come from the same scale of terrain, at a quarter of the
 /// pixels for k = 2. Isolated missing blocks are filled as in [`slope_into_with`] when asked.
+/// Binned frames are at most [`BIN_ROW_CAP`] pixels wide.
 pub fn slope_into_binned<'b>(
     dem: &DemPatch<'_>,
     k: usize,
+    out: &'b mut [SlopePx],
+    fill_isolated: bool,
+) -> Result<SlopeImage<'b>, FrameError> {
+    slope_into_binned_smoothed::<BIN_ROW_CAP>(dem, k, 0.0, out, fill_isolated)
+}
+
+/// Largest Gaussian radius, binned pixels, of [`slope_into_binned_smoothed`].
+pub const MAX_SMOOTH_RADIUS: usize = 6;
+/// Rows of filled heights the vertical Gaussian pass keeps.
+const SMOOTH_RING: usize = 2 * MAX_SMOOTH_RADIUS + 1;
+
+/// Gaussian weights `exp(−d²/2σ²)` for `d = 0..=R`, `R = min(⌈3σ⌉, MAX_SMOOTH_RADIUS)`
+/// (`R = 0`, no smoothing, for σ ≤ 0 or not finite). `libm`, so host and target agree bit for bit.
+fn gauss_weights(sigma_px: f32) -> ([f32; MAX_SMOOTH_RADIUS + 1], usize) {
+    let mut wt = [0.0f32; MAX_SMOOTH_RADIUS + 1];
+    wt[0] = 1.0;
+    if !(sigma_px > 0.0 && sigma_px.is_finite()) {
+        return (wt, 0);
+    }
+    let r = libm::ceilf(3.0 * sigma_px).min(MAX_SMOOTH_RADIUS as f32) as usize;
+    let inv = -0.5 / (sigma_px * sigma_px);
+    for (d, w) in wt.iter_mut().enumerate().take(r + 1) {
+        let x = d as f32;
+        *w = libm::expf(x * x * inv);
+    }
+    (wt, r)
+}
+
+/// [`slope_into_binned`] with the binned heights smoothed by a Gaussian of `sigma_px` binned
+/// pixels first (cut at [`MAX_SMOOTH_RADIUS`]; 0 = none), so a frame sees terrain at the same
+/// resolution as a reference tile whose DEM was smoothed by the same σ in metres (see
+/// `TileHeader::smoothing_m`). Smoothing is normalised over valid heights and never fills:
+/// a missing height stays missing. `CAP` is the widest binned row the stack rings hold
+/// (`(5 + 2·MAX_SMOOTH_RADIUS + 1 + 3 + 2) · CAP · 4` bytes of stack: 92 KiB for 1024, 18 KiB
+/// for the flight frame's 200).
+pub fn slope_into_binned_smoothed<'b, const CAP: usize>(
+    dem: &DemPatch<'_>,
+    k: usize,
+    sigma_px: f32,
     out: &'b mut [SlopePx],
     fill_isolated: bool,
 ) -> Result<SlopeImage<'b>, FrameError> {
@@ -69,10 +109,10 @@ pub fn slope_into_binned<'b>(
     if w == 0 || h == 0 {
         return Err(FrameError::Empty);
     }
-    if w > BIN_ROW_CAP {
+    if w > CAP {
         return Err(FrameError::TooLarge {
             needed: w,
-            capacity: BIN_ROW_CAP,
+            capacity: CAP,
         });
     }
     let n = w * h;
@@ -84,11 +124,17 @@ pub fn slope_into_binned<'b>(
     let pixel_m = dem.pixel_m() * k as f32;
     let inv8 = 1.0 / (8.0 * pixel_m);
     let half = (k * k).div_ceil(2);
-    // Streaming over coarse rows: each block mean is computed once into a 5-row ring, filled
-    // heights into a 3-row ring, and slope is written one row behind (48 KiB of stack at most).
-    let mut raw = [[f32::NAN; BIN_ROW_CAP]; 5];
-    let mut fil = [[f32::NAN; BIN_ROW_CAP]; 3];
-    let get = |rows: &[[f32; BIN_ROW_CAP]], ring: usize, r: isize, c: isize| -> f32 {
+    let (wt, rad) = gauss_weights(sigma_px);
+    let ri = rad as isize;
+    let ring = 2 * rad + 1;
+    // Streaming over coarse rows: block means into a 5-row ring, filled heights into a
+    // (2R + 1)-row ring, smoothed heights into a 3-row ring, slope written R + 1 rows behind.
+    let mut raw = [[f32::NAN; CAP]; 5];
+    let mut fil = [[f32::NAN; CAP]; SMOOTH_RING];
+    let mut smo = [[f32::NAN; CAP]; 3];
+    let mut num = [0.0f32; CAP];
+    let mut den = [0.0f32; CAP];
+    let get = |rows: &[[f32; CAP]], ring: usize, r: isize, c: isize| -> f32 {
         if r < 0 || c < 0 || r as usize >= h || c as usize >= w {
             return f32::NAN;
         }
@@ -97,7 +143,7 @@ pub fn slope_into_binned<'b>(
             .copied()
             .unwrap_or(f32::NAN)
     };
-    for r_in in 0..h + 2 {
+    for r_in in 0..h + 2 + rad {
         if r_in < h
             && let Some(row) = raw.get_mut(r_in % 5)
         {
@@ -120,9 +166,11 @@ pub fn slope_into_binned<'b>(
         }
         // Filled row F = r_in − 1 needs raw rows F − 1 ..= F + 1.
         let f = r_in as isize - 1;
-        if f >= 0 && (f as usize) < h {
-            let mut row = [f32::NAN; BIN_ROW_CAP];
-            for (c, slot) in row.iter_mut().take(w).enumerate() {
+        if f >= 0
+            && (f as usize) < h
+            && let Some(dst) = fil.get_mut(f as usize % ring)
+        {
+            for (c, slot) in dst.iter_mut().take(w).enumerate() {
                 let ci = c as isize;
                 let v = get(&raw, 5, f, ci);
                 *slot = if !v.is_nan() || !fill_isolated {
@@ -145,12 +193,48 @@ pub fn slope_into_binned<'b>(
                     }
                 };
             }
-            if let Some(dst) = fil.get_mut(f as usize % 3) {
-                *dst = row;
+        }
+        // Smoothed row G = r_in − 1 − R needs filled rows G − R ..= G + R.
+        let g = r_in as isize - 1 - ri;
+        if g >= 0 && (g as usize) < h {
+            for c in 0..w {
+                let (mut nv, mut dv) = (0.0f32, 0.0f32);
+                for d in -ri..=ri {
+                    let z = get(&fil, ring, g + d, c as isize);
+                    if !z.is_nan() {
+                        let wd = wt.get(d.unsigned_abs()).copied().unwrap_or(0.0);
+                        nv += wd * z;
+                        dv += wd;
+                    }
+                }
+                if let (Some(a), Some(b)) = (num.get_mut(c), den.get_mut(c)) {
+                    *a = nv;
+                    *b = dv;
+                }
+            }
+            if let Some(dst) = smo.get_mut(g as usize % 3) {
+                for (c, slot) in dst.iter_mut().take(w).enumerate() {
+                    let centre = get(&fil, ring, g, c as isize);
+                    *slot = if centre.is_nan() || rad == 0 {
+                        centre
+                    } else {
+                        let (mut nv, mut dv) = (0.0f32, 0.0f32);
+                        for d in -ri..=ri {
+                            let cc = c as isize + d;
+                            if cc < 0 || cc as usize >= w {
+                                continue;
+                            }
+                            let wd = wt.get(d.unsigned_abs()).copied().unwrap_or(0.0);
+                            nv += wd * num.get(cc as usize).copied().unwrap_or(0.0);
+                            dv += wd * den.get(cc as usize).copied().unwrap_or(0.0);
+                        }
+                        if dv > 0.0 { nv / dv } else { f32::NAN }
+                    };
+                }
             }
         }
-        // Slope row S = r_in − 2 needs filled rows S − 1 ..= S + 1.
-        let srow = r_in as isize - 2;
+        // Slope row S = r_in − 2 − R needs smoothed rows S − 1 ..= S + 1.
+        let srow = r_in as isize - 2 - ri;
         if srow < 0 || srow as usize >= h {
             continue;
         }
@@ -161,7 +245,7 @@ pub fn slope_into_binned<'b>(
             } else {
                 let z = |dc: usize, dr: usize| {
                     let v = get(
-                        &fil,
+                        &smo,
                         3,
                         srow + dr as isize - 1,
                         c as isize + dc as isize - 1,
@@ -377,5 +461,62 @@ mod tests {
                 capacity: 10
             })
         ));
+    }
+
+    #[test]
+    fn smoothing_keeps_planes_lowers_noise_and_never_fills() {
+        const N: usize = 40;
+        let mut z = [0.0f32; N * N];
+        let mut noisy = [0.0f32; N * N];
+        // Deterministic ±1 m checkerboard-ish roughness on a 0.2-gradient plane.
+        for r in 0..N {
+            for c in 0..N {
+                let p = 0.2 * (c as f32) * 10.0 + 50.0;
+                z[r * N + c] = p;
+                let e = ((r * 7 + c * 13) % 5) as f32 * 0.5 - 1.0;
+                noisy[r * N + c] = p + e;
+            }
+        }
+        let expect = libm::atanf(0.2) * DEG_PER_RAD;
+        let mut out = [SLOPE_NODATA; N * N];
+        let dem = DemPatch::new_checked(&z, N, N, 10.0).unwrap();
+        let img = slope_into_binned_smoothed::<N>(&dem, 1, 1.5, &mut out, false).unwrap();
+        for r in 6..N - 6 {
+            for c in 6..N - 6 {
+                let got = slope_to_deg(img.get(c, r)).unwrap();
+                assert!((got - expect).abs() <= SLOPE_LSB_DEG, "{got} vs {expect}");
+            }
+        }
+        let spread = |sigma: f32| -> f32 {
+            let mut out = [SLOPE_NODATA; N * N];
+            let dem = DemPatch::new_checked(&noisy, N, N, 10.0).unwrap();
+            let img = slope_into_binned_smoothed::<N>(&dem, 1, sigma, &mut out, false).unwrap();
+            let mut worst = 0.0f32;
+            for r in 6..N - 6 {
+                for c in 6..N - 6 {
+                    worst = worst.max((slope_to_deg(img.get(c, r)).unwrap() - expect).abs());
+                }
+            }
+            worst
+        };
+        let (raw, smooth) = (spread(0.0), spread(1.5));
+        assert!(smooth < 0.25 * raw, "{smooth} vs {raw}");
+        // A hole stays a hole (and masks its 3 × 3 slope block), nothing else is lost.
+        let mut holed = z;
+        holed[20 * N + 20] = f32::NAN;
+        let dem = DemPatch::new_checked(&holed, N, N, 10.0).unwrap();
+        let img = slope_into_binned_smoothed::<N>(&dem, 1, 1.5, &mut out, false).unwrap();
+        for r in 1..N - 1 {
+            for c in 1..N - 1 {
+                let near = r.abs_diff(20) <= 1 && c.abs_diff(20) <= 1;
+                assert_eq!(slope_is_valid(img.get(c, r)), !near, "({c}, {r})");
+            }
+        }
+        // Bad σ means no smoothing, a row wider than CAP a typed error; never a panic.
+        for bad in [f32::NAN, -1.0, f32::INFINITY] {
+            assert!(slope_into_binned_smoothed::<N>(&dem, 1, bad, &mut out, false).is_ok());
+        }
+        assert!(slope_into_binned_smoothed::<{ N - 1 }>(&dem, 1, 1.0, &mut out, false).is_err());
+        assert!(slope_into_binned_smoothed::<N>(&dem, 2, 100.0, &mut out, false).is_ok());
     }
 }

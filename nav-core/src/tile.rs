@@ -25,7 +25,7 @@ use serde::{Deserialize, Serialize};
 /// Magic bytes at offset 0.
 pub const TILE_MAGIC: [u8; 8] = *b"UMBRATIL";
 /// Format version this code reads and writes.
-pub const TILE_FORMAT_VERSION: u16 = 1;
+pub const TILE_FORMAT_VERSION: u16 = 2;
 /// Bytes before the header.
 pub const PREAMBLE_LEN: usize = 16;
 /// Bytes per keypoint record: x, y, scale, orientation, response (`f32`), flags (`u32`).
@@ -77,7 +77,16 @@ pub struct TileHeader<'a> {
     pub min_scale_px: f32,
     /// Whether orientations were assigned (false) or all zero (upright).
     pub upright: bool,
+    /// Resolution of the terrain the features were detected on: the standard deviation, metres,
+    /// of the Gaussian the reference DEM carries on top of its pixel averaging (smoothing
+    /// applied by the tile builder plus any the DEM source had, e.g. InSAR multilooking).
+    /// The flyer smooths its frames by the same σ before slope, so both sides see the same
+    /// terrain and their keypoints land alike. 0 = none; at most [`MAX_SMOOTHING_M`].
+    pub smoothing_m: f32,
 }
+
+/// Largest [`TileHeader::smoothing_m`] accepted, metres.
+pub const MAX_SMOOTHING_M: f32 = 10_000.0;
 
 impl TileHeader<'_> {
     /// The SURF settings the tile was built with (frames should use the same).
@@ -261,6 +270,7 @@ impl<'a> Tile<'a> {
             || !header.origin_y_m.is_finite()
             || header.projection.len() > MAX_PROJECTION_LEN
             || !detector_ok
+            || !(0.0..=MAX_SMOOTHING_M).contains(&header.smoothing_m)
         {
             return Err(TileError::BadGeometry);
         }
@@ -372,7 +382,9 @@ pub fn write_tile(
     if features.len() > MAX_TILE_FEATURES || header.feature_count as usize != features.len() {
         return Err(TileError::BadGeometry);
     }
-    if header.projection.len() > MAX_PROJECTION_LEN {
+    if header.projection.len() > MAX_PROJECTION_LEN
+        || !(0.0..=MAX_SMOOTHING_M).contains(&header.smoothing_m)
+    {
         return Err(TileError::BadGeometry);
     }
     let n = features.len();

@@ -28,6 +28,7 @@ const HEADER: TileHeader<'static> = TileHeader {
     threshold: 1.0,
     min_scale_px: 0.0,
     upright: false,
+    smoothing_m: 0.0,
 };
 
 /// `n_true` correspondences of X = 0.5·R(θ)·x + t with 0.3 px noise, plus `n_out` random pairs.

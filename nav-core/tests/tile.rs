@@ -19,6 +19,7 @@ fn header(n: usize) -> TileHeader<'static> {
         threshold: 1.0,
         min_scale_px: 0.0,
         upright: false,
+        smoothing_m: 40.0,
     }
 }
 
@@ -52,15 +53,16 @@ fn hex(b: &[u8]) -> String {
     b.iter().map(|x| format!("{x:02x}")).collect()
 }
 
-/// The first 72 bytes (preamble, header start) and the CRC of a one-feature tile, as written by format version 1.
+/// The first 72 bytes (preamble, header start) and the CRC of a one-feature tile, as written by
+/// format version 2 (version 1 had no `smoothing_m`).
 /// A change here is a format change: bump `TILE_FORMAT_VERSION` and `docs/tile-format.md`.
-const GOLDEN_HEAD: &str = "554d42524154494c0100550001000000c8019601000000000066f24000000000005be340000000000000344000000000000034c024706f6c61722073746572656f67726170686963";
-const GOLDEN_CRC: &str = "c26a9007";
+const GOLDEN_HEAD: &str = "554d42524154494c0200590001000000c8019601000000000066f24000000000005be340000000000000344000000000000034c024706f6c61722073746572656f67726170686963";
+const GOLDEN_CRC: &str = "16300ec0";
 
 #[test]
 fn golden_bytes() {
     let t = build(1);
-    assert_eq!(t.len(), 388);
+    assert_eq!(t.len(), 392);
     assert_eq!(t.len(), tile_len(t[10] as usize | (t[11] as usize) << 8, 1));
     assert_eq!(&t[..8], b"UMBRATIL");
     assert_eq!(u16::from_le_bytes([t[8], t[9]]), TILE_FORMAT_VERSION);
@@ -112,11 +114,30 @@ fn damage_gives_typed_errors() {
     assert_eq!(Tile::parse(&b).unwrap_err(), TileError::BadMagic);
     // Wrong version (even with a valid checksum).
     let mut b = good.clone();
-    b[8] = 2;
+    b[8] = 1;
     reseal(&mut b);
     assert_eq!(
         Tile::parse(&b).unwrap_err(),
-        TileError::WrongVersion { found: 2 }
+        TileError::WrongVersion { found: 1 }
+    );
+    // A NaN or negative terrain smoothing (the header's last field) behind a valid checksum.
+    let h_end = 16 + (good[10] as usize | (good[11] as usize) << 8);
+    for bad in [f32::NAN, -1.0, f32::INFINITY] {
+        let mut b = good.clone();
+        b[h_end - 4..h_end].copy_from_slice(&bad.to_le_bytes());
+        reseal(&mut b);
+        assert_eq!(
+            Tile::parse(&b).unwrap_err(),
+            TileError::BadGeometry,
+            "{bad}"
+        );
+    }
+    let mut h = header(1);
+    h.smoothing_m = -1.0;
+    let mut buf = vec![0u8; tile_len(512, 1)];
+    assert_eq!(
+        write_tile(&h, &[feature(0)], &mut buf),
+        Err(TileError::BadGeometry)
     );
     // A NaN descriptor value behind a valid checksum.
     let mut b = good.clone();

@@ -4,9 +4,9 @@
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use ground_sim::tile::{GeoGrid, build_tile};
-use nav_core::{DemPatch, NavConfig, NavWorkspace, Navigator, SlopeImage, SurfConfig, Tile};
+use nav_core::{DemPatch, NavConfig, NavWorkspace, Navigator, SurfConfig, Tile};
 use std::hint::black_box;
-use umbra_tests::{CraterField, FramePose, render_dem, render_slope};
+use umbra_tests::{CraterField, FramePose, render_dem};
 
 const W: usize = 200;
 
@@ -18,8 +18,21 @@ fn bench_navigator(c: &mut Criterion) {
         heading_rad: 0.0,
         pixel_m: 20.0,
     };
-    let slope = render_slope(&field, &ref_pose, 256, 256);
-    let img = SlopeImage::new_checked(&slope, 256, 256, 20.0).unwrap_or_else(|e| panic!("{e}"));
+    // The reference as ground-sim builds it: DEM smoothed by the default terrain σ, so the
+    // frame path below runs its Gaussian stage as on the flyer.
+    let smoothing_m = ground_sim::reference::DEFAULT_SMOOTHING_M;
+    let ref_dem = render_dem(&field, &ref_pose, 256, 256);
+    let ref_patch =
+        DemPatch::new_checked(&ref_dem, 256, 256, 20.0).unwrap_or_else(|e| panic!("{e}"));
+    let mut slope = vec![nav_core::SLOPE_NODATA; 256 * 256];
+    let img = nav_core::slope::slope_into_binned_smoothed::<256>(
+        &ref_patch,
+        1,
+        (smoothing_m / 20.0) as f32,
+        &mut slope,
+        false,
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
     let grid = GeoGrid {
         origin_x_m: 0.0,
         origin_y_m: 0.0,
@@ -35,7 +48,8 @@ fn bench_navigator(c: &mut Criterion) {
         detector,
         upright: false,
     };
-    let tile_bytes = build_tile(&img, &grid, &cfg, 512).unwrap_or_else(|e| panic!("{e}"));
+    let tile_bytes =
+        build_tile(&img, &grid, &cfg, 512, smoothing_m).unwrap_or_else(|e| panic!("{e}"));
     let tile = Tile::parse(&tile_bytes).unwrap_or_else(|e| panic!("{e}"));
     let nav = Navigator::new(tile, NavConfig::default());
     let pose = FramePose {

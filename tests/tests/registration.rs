@@ -51,6 +51,8 @@ fn reference() -> (Vec<nav_core::SlopePx>, Vec<u8>) {
         &grid,
         &SurfConfig::default(),
         ground_sim::tile::MAX_TILE_FEATURES,
+        // Slope frames are compared as given: no terrain smoothing.
+        0.0,
     )
     .unwrap();
     (slope, tile)

@@ -6,7 +6,7 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use ground_sim::dem::read_geotiff;
-use ground_sim::reference::{reference_dem, write_reference};
+use ground_sim::reference::{DEFAULT_SMOOTHING_M, Smoothing, reference_dem, write_reference};
 use ground_sim::tile::MAX_TILE_FEATURES;
 use nav_core::{DetectorConfig, SurfConfig};
 
@@ -25,6 +25,15 @@ pub struct Args {
     /// Detector threshold, (degrees of slope)².
     #[arg(long, default_value_t = DetectorConfig::default().threshold)]
     pub threshold: f32,
+    /// Terrain smoothing, metres: Gaussian σ applied to the reference DEM before slope and
+    /// recorded in the tile, so the flyer smooths its frames alike (0 = none). At most 2
+    /// reference pixels.
+    #[arg(long, default_value_t = DEFAULT_SMOOTHING_M)]
+    pub smoothing_m: f64,
+    /// Gaussian-equivalent σ the DEM already carries, metres (e.g. an InSAR DEM: 22.4 with
+    /// `insar`'s defaults); only the remainder is applied.
+    #[arg(long, default_value_t = 0.0)]
+    pub inherent_smoothing_m: f64,
     /// Most features kept (strongest first).
     #[arg(long, default_value_t = MAX_TILE_FEATURES)]
     pub max_features: usize,
@@ -44,12 +53,22 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         },
         upright: false,
     };
-    let s = write_reference(&r, &a.out, &cfg, a.max_features.min(MAX_TILE_FEATURES))?;
+    let s = write_reference(
+        &r,
+        &a.out,
+        &cfg,
+        a.max_features.min(MAX_TILE_FEATURES),
+        Smoothing {
+            target_m: a.smoothing_m,
+            inherent_m: a.inherent_smoothing_m,
+        },
+    )?;
     println!(
-        "reference  {}x{} px at {} m: {} features, {} bytes -> {}",
+        "reference  {}x{} px at {} m, smoothing σ {} m: {} features, {} bytes -> {}",
         s.width_px,
         s.height_px,
         s.pixel_m,
+        s.smoothing_m,
         s.features,
         s.tile_bytes,
         a.out.display()

@@ -58,6 +58,11 @@ pub struct Looks {
     pub power1: Vec<f64>,
     /// `Σ |A2|²` per output.
     pub power2: Vec<f64>,
+    /// Where in the window the phase was measured: the `|A1·A2|`-weighted centroid of the
+    /// window's samples relative to its centre, `(Δline, Δgate)` in SLC samples. For phases
+    /// that vary little across the window, `arg Σ A1·A2*` is the phase at this point, not at
+    /// the centre: speckle moves it by ≈ 1–2 samples, a height error of slope × that distance.
+    pub centroid: Vec<(f64, f64)>,
 }
 
 impl Looks {
@@ -94,28 +99,32 @@ pub fn multilook(
         .map(|&p| C64::new(p.cos(), -p.sin()))
         .collect();
     // Per SLC line: range-window sums at every output gate; then sum `size` lines.
-    let row_sums = |i: usize| -> Vec<(C64, C64, f64, f64)> {
+    let half = 0.5 * (w.size as f64 - 1.0);
+    let row_sums = |i: usize| -> Vec<Sums> {
         let (r1, r2) = (
             &a1[i * gates..(i + 1) * gates],
             &a2[i * gates..(i + 1) * gates],
         );
         (0..go)
             .map(|m| {
-                let mut acc = (C64::new(0.0, 0.0), C64::new(0.0, 0.0), 0.0, 0.0);
-                for j in w.step * m..w.step * m + w.size {
+                let mut acc = Sums::default();
+                for (o, j) in (w.step * m..w.step * m + w.size).enumerate() {
                     let (x, y) = (r1[j], r2[j]);
                     let p = C64::new(f64::from(x.re), f64::from(x.im))
                         * C64::new(f64::from(y.re), -f64::from(y.im));
-                    acc.0 += p * deramp[j];
-                    acc.1 += p;
-                    acc.2 += f64::from(x.norm_sqr());
-                    acc.3 += f64::from(y.norm_sqr());
+                    acc.cross += p * deramp[j];
+                    acc.raw += p;
+                    acc.p1 += f64::from(x.norm_sqr());
+                    acc.p2 += f64::from(y.norm_sqr());
+                    let a = p.norm();
+                    acc.w += a;
+                    acc.wg += a * (o as f64 - half);
                 }
                 acc
             })
             .collect()
     };
-    let rows: Vec<Vec<(C64, C64, f64, f64)>> = (0..lines).into_par_iter().map(row_sums).collect();
+    let rows: Vec<Vec<Sums>> = (0..lines).into_par_iter().map(row_sums).collect();
     let n = lo * go;
     let mut out = Looks {
         lines: lo,
@@ -124,19 +133,42 @@ pub fn multilook(
         cross_raw: vec![C64::new(0.0, 0.0); n],
         power1: vec![0.0; n],
         power2: vec![0.0; n],
+        centroid: vec![(0.0, 0.0); n],
     };
+    let mut weight = vec![(0.0f64, 0.0f64, 0.0f64); n];
     for k in 0..lo {
-        for row in &rows[w.step * k..w.step * k + w.size] {
+        for (l, row) in rows[w.step * k..w.step * k + w.size].iter().enumerate() {
+            let dl = l as f64 - half;
             for (m, s) in row.iter().enumerate() {
                 let o = k * go + m;
-                out.cross[o] += s.0;
-                out.cross_raw[o] += s.1;
-                out.power1[o] += s.2;
-                out.power2[o] += s.3;
+                out.cross[o] += s.cross;
+                out.cross_raw[o] += s.raw;
+                out.power1[o] += s.p1;
+                out.power2[o] += s.p2;
+                weight[o].0 += s.w;
+                weight[o].1 += s.w * dl;
+                weight[o].2 += s.wg;
             }
         }
     }
+    for (c, &(sw, sl, sg)) in out.centroid.iter_mut().zip(&weight) {
+        if sw > 0.0 {
+            *c = (sl / sw, sg / sw);
+        }
+    }
     out
+}
+
+/// One SLC line's sums over a range window.
+#[derive(Debug, Clone, Copy, Default)]
+struct Sums {
+    cross: C64,
+    raw: C64,
+    p1: f64,
+    p2: f64,
+    /// `Σ |A1·A2|` and `Σ |A1·A2|·(gate − window centre)`.
+    w: f64,
+    wg: f64,
 }
 
 /// Equivalent number of independent looks of a `size`-sample average along one axis of an SLC

@@ -3,6 +3,8 @@
 
 use std::time::Instant;
 
+use rayon::prelude::*;
+
 use serde::Serialize;
 
 use super::coreg::{
@@ -41,6 +43,9 @@ pub struct InsarConfig {
     /// pixel-scale height noise that the slope operator amplifies (measured in
     /// `docs/insar.md`).
     pub dem_filter_sigma_px: f64,
+    /// Passes of the speckle-centroid correction ([`recentre_heights`]; 0 = none, the paper's
+    /// processing). Not in the paper: see `docs/insar.md`.
+    pub recentre_passes: usize,
     /// Range sampling rate over the processed bandwidth (SAR default 2), for the looks.
     pub range_oversampling: f64,
     /// PRF over the processed Doppler bandwidth (SAR default 2), for the looks.
@@ -60,6 +65,7 @@ impl Default for InsarConfig {
             check_coregistration: true,
             geocode: GeocodeParams::default(),
             dem_filter_sigma_px: 1.0,
+            recentre_passes: 2,
             range_oversampling: 2.0,
             azimuth_oversampling: 2.0,
             hamming_alpha: 0.54,
@@ -74,6 +80,17 @@ impl InsarConfig {
         self.azimuth_oversampling = sar.azimuth_oversampling;
         self.hamming_alpha = sar.hamming_alpha;
         self
+    }
+
+    /// Gaussian-equivalent σ, metres, that the output DEM carries beyond the averaging of its
+    /// own pixel: the multilook window (a box `size/step` output pixels wide, variance
+    /// `L²/12` per axis, less the pixel's own `pixel²/12`) and the DEM filter. With the defaults
+    /// `sqrt((40² − 20²)/12 + 20²)` = 22.4 m. The reference tile tops this up to its target.
+    pub fn inherent_smoothing_m(&self) -> f64 {
+        let box_px = self.window.size as f64 / self.window.step.max(1) as f64;
+        let window_var = (box_px * box_px - 1.0).max(0.0) * self.pixel_m.powi(2) / 12.0;
+        let filter = self.dem_filter_sigma_px * self.pixel_m;
+        (window_var + filter * filter).sqrt()
     }
 
     fn validate(&self) -> InsarResult<()> {
@@ -331,6 +348,22 @@ pub fn process_pair(
         }
     }
 
+    // 5b. Speckle moves the point whose phase a window measures by 1–2 samples from its centre
+    //     (the |A1·A2|-weighted centroid); on a slope that is a height error of slope × offset,
+    //     the largest error of the noise-free chain. Move each height back to its window centre
+    //     with the local gradient.
+    if cfg.recentre_passes > 0 {
+        let valid: Vec<bool> = labels.iter().map(|&l| l == label::VALID).collect();
+        z = recentre_heights(
+            &z,
+            &valid,
+            co,
+            w.step as f64,
+            &looks.centroid,
+            cfg.recentre_passes,
+        );
+    }
+
     // 6. True ground positions from R1 and the height. The position uses the 3×3 mean height of
     //    valid neighbours: the parallax is Δz·cot θ ≈ 2Δz, so per-pixel height noise would
     //    otherwise jitter positions by twice its size and fold neighbours over each other.
@@ -461,6 +494,56 @@ pub fn process_pair(
         coherence_mean_radar,
         seconds: t0.elapsed().as_secs_f64(),
     })
+}
+
+/// Heights `z` (row-major, `cols` per line) measured at the window centroids `centroid`
+/// (`(Δline, Δgate)`, SLC samples) moved to the window centres: `z − ∇z·Δ`, with `∇z` by central
+/// differences of valid neighbours `step` samples apart, re-estimated from the corrected heights
+/// on each of `passes` passes. Invalid pixels are returned unchanged.
+pub fn recentre_heights(
+    z: &[f64],
+    valid: &[bool],
+    cols: usize,
+    step: f64,
+    centroid: &[(f64, f64)],
+    passes: usize,
+) -> Vec<f64> {
+    let lines = z.len() / cols.max(1);
+    let mut cur = z.to_vec();
+    for _ in 0..passes {
+        let next: Vec<f64> = (0..z.len())
+            .into_par_iter()
+            .map(|i| {
+                if !valid[i] {
+                    return z[i];
+                }
+                let (k, m) = (i / cols, i % cols);
+                // Derivative along one axis from the valid neighbours at −1 and +1.
+                let deriv = |lo: Option<usize>, hi: Option<usize>| -> f64 {
+                    let lo = lo.filter(|&j| valid[j]);
+                    let hi = hi.filter(|&j| valid[j]);
+                    match (lo, hi) {
+                        (Some(a), Some(b)) => (cur[b] - cur[a]) / (2.0 * step),
+                        (Some(a), None) => (cur[i] - cur[a]) / step,
+                        (None, Some(b)) => (cur[b] - cur[i]) / step,
+                        (None, None) => 0.0,
+                    }
+                };
+                let along_line = deriv(
+                    k.checked_sub(1).map(|kk| kk * cols + m),
+                    (k + 1 < lines).then(|| (k + 1) * cols + m),
+                );
+                let along_gate = deriv(
+                    m.checked_sub(1).map(|mm| k * cols + mm),
+                    (m + 1 < cols).then(|| k * cols + m + 1),
+                );
+                let (dl, dg) = centroid[i];
+                z[i] - along_line * dl - along_gate * dg
+            })
+            .collect();
+        cur = next;
+    }
+    cur
 }
 
 /// Gaussian filter of standard deviation `sigma_px` (kernel cut at 3σ) over the finite values

@@ -16,7 +16,7 @@ use super::pipeline::{
 };
 use crate::analysis::slope_deg;
 use crate::dem::{Dem, SampleKind, write_geotiff};
-use crate::reference::{TileSummary, write_reference};
+use crate::reference::{Smoothing, TileSummary, write_reference};
 use crate::render::{ColourMap, RasterStyle, raster_image};
 use crate::sar::pipeline::{InsarPair, Timings};
 use crate::sar::{Derived, SarConfig};
@@ -133,8 +133,17 @@ pub fn write_outputs(
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let truth_grid = &truth.grid;
     let accuracy = compare(p, truth_grid, Some(&truth.window))?;
-    let tile = write_reference(&p.dem, dir, &SurfConfig::default(), MAX_TILE_FEATURES)
-        .context("building the reference tile")?;
+    let tile = write_reference(
+        &p.dem,
+        dir,
+        &SurfConfig::default(),
+        MAX_TILE_FEATURES,
+        Smoothing {
+            target_m: crate::reference::DEFAULT_SMOOTHING_M,
+            inherent_m: p.config.inherent_smoothing_m(),
+        },
+    )
+    .context("building the reference tile")?;
     let mut files: Vec<String> = [
         crate::reference::TILE_FILE,
         crate::reference::SLOPE_FILE,

@@ -236,7 +236,16 @@ pub fn generate_set(terrain_frames: usize) -> Result<FrameSet> {
     }
     let patch = nav_core::DemPatch::new_checked(&coarse, t, t, TILE_PIXEL_M as f32)?;
     let mut slope = vec![SLOPE_NODATA; t * t];
-    let img: SlopeImage<'_> = nav_core::slope::slope_into(&patch, &mut slope)?;
+    // The tile carries ground-sim's default terrain smoothing, so the target runs the frames'
+    // Gaussian stage too (and its results are checked bit for bit).
+    let smoothing_m = ground_sim::reference::DEFAULT_SMOOTHING_M;
+    let img: SlopeImage<'_> = nav_core::slope::slope_into_binned_smoothed::<1024>(
+        &patch,
+        1,
+        (smoothing_m / TILE_PIXEL_M) as f32,
+        &mut slope,
+        false,
+    )?;
     let grid = GeoGrid {
         origin_x_m: -0.5 * (TERRAIN_SIDE as f64 * FRAME_PIXEL_M as f64) + 0.5 * TILE_PIXEL_M,
         origin_y_m: 0.5 * (TERRAIN_SIDE as f64 * FRAME_PIXEL_M as f64) - 0.5 * TILE_PIXEL_M,
@@ -244,8 +253,14 @@ pub fn generate_set(terrain_frames: usize) -> Result<FrameSet> {
         pixel_y_m: -TILE_PIXEL_M,
         projection: "local metric grid, Shoemaker floor synthetic scene (hil-bridge)".into(),
     };
-    let tile = build_tile(&img, &grid, &SurfConfig::default(), MAX_TILE_FEATURES)
-        .context("reference tile")?;
+    let tile = build_tile(
+        &img,
+        &grid,
+        &SurfConfig::default(),
+        MAX_TILE_FEATURES,
+        smoothing_m,
+    )
+    .context("reference tile")?;
 
     let mut frames = Vec::new();
     let mut rng = Rng(0xF2A3E5);
