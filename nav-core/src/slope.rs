@@ -194,42 +194,56 @@ pub fn slope_into_binned_smoothed<'b, const CAP: usize>(
                 };
             }
         }
-        // Smoothed row G = r_in − 1 − R needs filled rows G − R ..= G + R.
+        // Smoothed row G = r_in − 1 − R needs filled rows G − R ..= G + R. Separable and
+        // normalised over valid heights: vertical sums per column, then along the row.
         let g = r_in as isize - 1 - ri;
         if g >= 0 && (g as usize) < h {
-            for c in 0..w {
-                let (mut nv, mut dv) = (0.0f32, 0.0f32);
+            let gu = g as usize;
+            let centre_row = fil.get(gu % ring).copied().unwrap_or([f32::NAN; CAP]);
+            let dst = smo.get_mut(gu % 3);
+            if rad == 0 {
+                if let Some(dst) = dst {
+                    *dst = centre_row;
+                }
+            } else {
+                num.iter_mut().for_each(|v| *v = 0.0);
+                den.iter_mut().for_each(|v| *v = 0.0);
                 for d in -ri..=ri {
-                    let z = get(&fil, ring, g + d, c as isize);
-                    if !z.is_nan() {
-                        let wd = wt.get(d.unsigned_abs()).copied().unwrap_or(0.0);
-                        nv += wd * z;
-                        dv += wd;
+                    let rr = g + d;
+                    if rr < 0 || rr as usize >= h {
+                        continue;
+                    }
+                    let wd = wt.get(d.unsigned_abs()).copied().unwrap_or(0.0);
+                    let Some(src) = fil.get(rr as usize % ring) else {
+                        continue;
+                    };
+                    for ((&z, a), b) in src.iter().zip(num.iter_mut()).zip(den.iter_mut()).take(w) {
+                        if !z.is_nan() {
+                            *a += wd * z;
+                            *b += wd;
+                        }
                     }
                 }
-                if let (Some(a), Some(b)) = (num.get_mut(c), den.get_mut(c)) {
-                    *a = nv;
-                    *b = dv;
-                }
-            }
-            if let Some(dst) = smo.get_mut(g as usize % 3) {
-                for (c, slot) in dst.iter_mut().take(w).enumerate() {
-                    let centre = get(&fil, ring, g, c as isize);
-                    *slot = if centre.is_nan() || rad == 0 {
-                        centre
-                    } else {
-                        let (mut nv, mut dv) = (0.0f32, 0.0f32);
-                        for d in -ri..=ri {
-                            let cc = c as isize + d;
-                            if cc < 0 || cc as usize >= w {
-                                continue;
+                if let Some(dst) = dst {
+                    for (c, (slot, &centre)) in
+                        dst.iter_mut().zip(centre_row.iter()).take(w).enumerate()
+                    {
+                        *slot = if centre.is_nan() {
+                            centre
+                        } else {
+                            let lo = c.saturating_sub(rad);
+                            let hi = (c + rad).min(w - 1);
+                            let (mut nv, mut dv) = (0.0f32, 0.0f32);
+                            let taps = num.get(lo..=hi).into_iter().flatten();
+                            let dtaps = den.get(lo..=hi).into_iter().flatten();
+                            for (j, (&a, &b)) in taps.zip(dtaps).enumerate() {
+                                let wd = wt.get((lo + j).abs_diff(c)).copied().unwrap_or(0.0);
+                                nv += wd * a;
+                                dv += wd * b;
                             }
-                            let wd = wt.get(d.unsigned_abs()).copied().unwrap_or(0.0);
-                            nv += wd * num.get(cc as usize).copied().unwrap_or(0.0);
-                            dv += wd * den.get(cc as usize).copied().unwrap_or(0.0);
-                        }
-                        if dv > 0.0 { nv / dv } else { f32::NAN }
-                    };
+                            if dv > 0.0 { nv / dv } else { f32::NAN }
+                        };
+                    }
                 }
             }
         }
