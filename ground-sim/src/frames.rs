@@ -177,8 +177,9 @@ pub fn frame_reach_m(sensor: &SensorModel, pixel_m: f64) -> f64 {
     0.5 * ((sensor.width_px as f64).hypot(sensor.height_px as f64) + 2.0) * pixel_m
 }
 
-/// Slope (degrees, NaN = no data) of a frame, by nav-core's onboard implementation.
-pub fn frame_slope_deg(frame: &Frame) -> Vec<f32> {
+/// Slope (degrees, NaN = no data) of a frame after a Gaussian of `smoothing_m` metres (0 = none;
+/// a tile's terrain smoothing), by nav-core's onboard implementation, at the frame's own pixel.
+pub fn frame_slope_deg(frame: &Frame, smoothing_m: f64) -> Vec<f32> {
     use nav_core::frame::{DemPatch, SLOPE_NODATA, slope_to_deg};
     let mut px = vec![SLOPE_NODATA; frame.width * frame.height];
     if let Ok(patch) = DemPatch::new_checked(
@@ -187,7 +188,10 @@ pub fn frame_slope_deg(frame: &Frame) -> Vec<f32> {
         frame.height,
         frame.pose.pixel_m as f32,
     ) {
-        let _ = nav_core::slope::slope_into(&patch, &mut px);
+        let sigma_px = (smoothing_m / frame.pose.pixel_m) as f32;
+        let _ = nav_core::slope::slope_into_binned_smoothed::<{ crate::onboard::MAX_FRAME_SIDE }>(
+            &patch, 1, sigma_px, &mut px, false,
+        );
     }
     px.iter()
         .map(|&p| slope_to_deg(p).unwrap_or(f32::NAN))

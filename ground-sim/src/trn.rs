@@ -146,6 +146,8 @@ pub struct FrameCheck {
     pub run: FrameRun,
     /// Its scores against the truth.
     pub score: TrnScore,
+    /// The tile's terrain smoothing σ, metres (the picture shows the frame smoothed alike).
+    pub smoothing_m: f32,
 }
 
 /// Synthesise the frame at `pose` from `dem`, locate it against `tile` with the default
@@ -166,14 +168,19 @@ pub fn check_frame(
         run_frame(&nav, &mut ws, input, None).map_err(|e| anyhow::anyhow!("{e}"))
     })?;
     let score = score(tile, &run, pose, frame.width, frame.height);
-    Ok(FrameCheck { frame, run, score })
+    Ok(FrameCheck {
+        frame,
+        run,
+        score,
+        smoothing_m: tile.header().smoothing_m,
+    })
 }
 
 impl FrameCheck {
     /// The paper's Fig. 7 picture: this frame's slope (left) and the reference slope map
     /// (degrees, right) with the match lines.
     pub fn picture(&self, ref_slope: &crate::dem::Dem) -> image::RgbImage {
-        let fs = crate::frames::frame_slope_deg(&self.frame);
+        let fs = crate::frames::frame_slope_deg(&self.frame, f64::from(self.smoothing_m));
         crate::matchplot::match_picture(
             (&fs, self.frame.width, self.frame.height),
             (ref_slope.heights_m(), ref_slope.width(), ref_slope.height()),

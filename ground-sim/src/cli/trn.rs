@@ -157,7 +157,8 @@ fn export(
             Ok(())
         };
     png16(
-        &ground_sim::frames::frame_slope_deg(frame),
+        // As the flyer sees it: smoothed by the tile's terrain σ (at the frame's own pixel).
+        &ground_sim::frames::frame_slope_deg(frame, f64::from(h.smoothing_m)),
         frame.width,
         frame.height,
         dir.join("frame_slope.png"),
