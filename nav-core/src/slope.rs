@@ -197,14 +197,13 @@ pub fn slope_into_binned_smoothed<'b, const CAP: usize>(
         // Smoothed row G = r_in − 1 − R needs filled rows G − R ..= G + R. Separable and
         // normalised over valid heights: vertical sums per column, then along the row.
         let g = r_in as isize - 1 - ri;
-        if g >= 0 && (g as usize) < h {
-            let gu = g as usize;
-            let centre_row = fil.get(gu % ring).copied().unwrap_or([f32::NAN; CAP]);
-            let dst = smo.get_mut(gu % 3);
+        if g >= 0
+            && (g as usize) < h
+            && let (Some(centre_row), Some(dst)) =
+                (fil.get(g as usize % ring), smo.get_mut(g as usize % 3))
+        {
             if rad == 0 {
-                if let Some(dst) = dst {
-                    *dst = centre_row;
-                }
+                *dst = *centre_row;
             } else {
                 num.iter_mut().for_each(|v| *v = 0.0);
                 den.iter_mut().for_each(|v| *v = 0.0);
@@ -224,26 +223,24 @@ pub fn slope_into_binned_smoothed<'b, const CAP: usize>(
                         }
                     }
                 }
-                if let Some(dst) = dst {
-                    for (c, (slot, &centre)) in
-                        dst.iter_mut().zip(centre_row.iter()).take(w).enumerate()
-                    {
-                        *slot = if centre.is_nan() {
-                            centre
-                        } else {
-                            let lo = c.saturating_sub(rad);
-                            let hi = (c + rad).min(w - 1);
-                            let (mut nv, mut dv) = (0.0f32, 0.0f32);
-                            let taps = num.get(lo..=hi).into_iter().flatten();
-                            let dtaps = den.get(lo..=hi).into_iter().flatten();
-                            for (j, (&a, &b)) in taps.zip(dtaps).enumerate() {
-                                let wd = wt.get((lo + j).abs_diff(c)).copied().unwrap_or(0.0);
-                                nv += wd * a;
-                                dv += wd * b;
-                            }
-                            if dv > 0.0 { nv / dv } else { f32::NAN }
-                        };
-                    }
+                for (c, (slot, &centre)) in
+                    dst.iter_mut().zip(centre_row.iter()).take(w).enumerate()
+                {
+                    *slot = if centre.is_nan() {
+                        centre
+                    } else {
+                        let lo = c.saturating_sub(rad);
+                        let hi = (c + rad).min(w - 1);
+                        let (mut nv, mut dv) = (0.0f32, 0.0f32);
+                        let taps = num.get(lo..=hi).into_iter().flatten();
+                        let dtaps = den.get(lo..=hi).into_iter().flatten();
+                        for (j, (&a, &b)) in taps.zip(dtaps).enumerate() {
+                            let wd = wt.get((lo + j).abs_diff(c)).copied().unwrap_or(0.0);
+                            nv += wd * a;
+                            dv += wd * b;
+                        }
+                        if dv > 0.0 { nv / dv } else { f32::NAN }
+                    };
                 }
             }
         }

@@ -102,6 +102,15 @@ pub struct FrameSet {
     pub frames: Vec<Frame>,
 }
 
+/// Terrain smoothing σ of the HIL tile, metres: `UMBRA_HIL_SMOOTHING_M`, else 0 (see
+/// [`generate_set`]).
+pub fn tile_smoothing_m() -> f64 {
+    std::env::var("UMBRA_HIL_SMOOTHING_M")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(0.0)
+}
+
 /// Deterministic xorshift-multiply generator for the stress frames.
 struct Rng(u64);
 impl Rng {
@@ -239,10 +248,7 @@ pub fn generate_set(terrain_frames: usize) -> Result<FrameSet> {
     // No terrain smoothing in the HIL tile yet: with ground-sim's default (40 m) the frames'
     // Gaussian stage ran bit-exact on the target but took the worst frame from 18.9 M to 25.1 M
     // instructions, over the 20 M budget; `UMBRA_HIL_SMOOTHING_M` turns it on for measuring.
-    let smoothing_m: f64 = std::env::var("UMBRA_HIL_SMOOTHING_M")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(0.0);
+    let smoothing_m = tile_smoothing_m();
     let img: SlopeImage<'_> = nav_core::slope::slope_into_binned_smoothed::<1024>(
         &patch,
         1,

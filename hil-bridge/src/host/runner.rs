@@ -152,11 +152,13 @@ fn say(on: bool, msg: impl AsRef<str>) {
 /// Load the recorded frame set, generating it first if needed.
 pub fn load_or_generate(opts: &RunOptions) -> Result<FrameSet> {
     let dir = opts.data_dir();
-    // A set recorded by an older build (another tile format) is regenerated, not linked in:
-    // the firmware would refuse its tile and the compiler would drop the navigator with it.
+    // A set recorded by an older build (another tile format: the firmware would refuse its tile
+    // and the compiler would drop the navigator with it) or with another tile smoothing is
+    // regenerated, not reused.
     if !opts.regenerate
         && let Ok(set) = FrameSet::read(&dir)
-        && nav_core::Tile::parse(&set.tile).is_ok()
+        && nav_core::Tile::parse(&set.tile)
+            .is_ok_and(|t| t.header().smoothing_m == super::frames::tile_smoothing_m() as f32)
     {
         return Ok(set);
     }
