@@ -126,9 +126,22 @@ pub fn reference_dem(dem: &Dem, pixel_m: f64) -> Result<Dem> {
 
 /// Default terrain resolution of reference tiles: a Gaussian of σ = 40 m (2 reference pixels)
 /// on top of the 20 m pixel averaging. Both sides smoothing to this σ makes frame and tile
-/// keypoints land alike; measured on `eval` campaigns (docs/results.md): heading error p95
-/// 0.535° → 0.215° against truth tiles, success 53 % → 97.6 % against InSAR tiles.
+/// keypoints land alike: heading error p95 0.535° → 0.215° against truth tiles (docs/results.md).
+/// Larger σ (up to 60 m, 3 px) helps against InSAR tiles on one preset and not the other, and
+/// with [`DEFAULT_THRESHOLD`] lowered it lets false fixes through: measured sweep in
+/// docs/insar.md ("Terrain smoothing and detector threshold of InSAR tiles").
 pub const DEFAULT_SMOOTHING_M: f64 = 40.0;
+
+/// Default detector threshold of reference tiles, (degrees of slope)² over the filter area
+/// (nav-core's general default). The tile header carries it, so frames are detected alike.
+pub const DEFAULT_THRESHOLD: f32 = 0.1;
+
+/// SURF settings of reference tiles: nav-core's defaults with [`DEFAULT_THRESHOLD`].
+pub fn reference_surf_config() -> nav_core::SurfConfig {
+    let mut cfg = nav_core::SurfConfig::default();
+    cfg.detector.threshold = DEFAULT_THRESHOLD;
+    cfg
+}
 
 /// Widest reference slope map, pixels (the stack rings of nav-core's streaming slope).
 pub const MAX_REFERENCE_WIDTH: usize = 2048;

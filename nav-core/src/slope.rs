@@ -64,7 +64,7 @@ pub fn slope_into_binned<'b>(
 }
 
 /// Largest Gaussian radius, binned pixels, of [`slope_into_binned_smoothed`].
-pub const MAX_SMOOTH_RADIUS: usize = 6;
+pub const MAX_SMOOTH_RADIUS: usize = 9;
 /// Rows of filled heights the vertical Gaussian pass keeps.
 const SMOOTH_RING: usize = 2 * MAX_SMOOTH_RADIUS + 1;
 
@@ -90,7 +90,7 @@ fn gauss_weights(sigma_px: f32) -> ([f32; MAX_SMOOTH_RADIUS + 1], usize) {
 /// resolution as a reference tile whose DEM was smoothed by the same σ in metres (see
 /// `TileHeader::smoothing_m`). Smoothing is normalised over valid heights and never fills:
 /// a missing height stays missing. `CAP` is the widest binned row the stack rings hold
-/// (`(5 + 2·MAX_SMOOTH_RADIUS + 1 + 3 + 2) · CAP · 4` bytes of stack: 92 KiB for 1024, 18 KiB
+/// (`(5 + 2·MAX_SMOOTH_RADIUS + 1 + 3 + 2) · CAP · 4` bytes of stack: 116 KiB for 1024, 23 KiB
 /// for the flight frame's 200).
 pub fn slope_into_binned_smoothed<'b, const CAP: usize>(
     dem: &DemPatch<'_>,

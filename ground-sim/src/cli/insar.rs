@@ -37,6 +37,10 @@ pub struct Args {
     /// Gaussian filter of the geocoded DEM, standard deviation in output pixels (0 = none).
     #[arg(long, default_value_t = InsarConfig::default().dem_filter_sigma_px)]
     pub dem_filter_sigma_px: f64,
+    /// Passes of the speckle-centroid correction (each halves the remaining shift; 0 = the
+    /// paper's chain, heights at the window centres).
+    #[arg(long, default_value_t = InsarConfig::default().recentre_passes)]
+    pub recentre_passes: usize,
     /// Use the flat-removed phase wrapped (no unwrapping).
     #[arg(long)]
     pub no_unwrap: bool,
@@ -71,6 +75,7 @@ pub fn run_chain(a: &Args) -> anyhow::Result<InsarReport> {
         min_coherence: a.min_coherence,
         unwrap: !a.no_unwrap,
         dem_filter_sigma_px: a.dem_filter_sigma_px,
+        recentre_passes: a.recentre_passes,
         ..InsarConfig::default()
     }
     .with_radar(&sar);

@@ -23,10 +23,10 @@ pub struct Args {
     #[arg(long)]
     pub out: PathBuf,
     /// Detector threshold, (degrees of slope)².
-    #[arg(long, default_value_t = DetectorConfig::default().threshold)]
+    #[arg(long, default_value_t = ground_sim::reference::DEFAULT_THRESHOLD)]
     pub threshold: f32,
     /// Terrain smoothing, metres: Gaussian σ applied to the reference DEM before slope and
-    /// recorded in the tile, so the flyer smooths its frames alike (0 = none). At most 2
+    /// recorded in the tile, so the flyer smooths its frames alike (0 = none). At most 3
     /// reference pixels.
     #[arg(long, default_value_t = DEFAULT_SMOOTHING_M)]
     pub smoothing_m: f64,

@@ -6,7 +6,6 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
-use nav_core::SurfConfig;
 use serde::Serialize;
 
 use super::accuracy::{Accuracy, compare};
@@ -136,7 +135,7 @@ pub fn write_outputs(
     let tile = write_reference(
         &p.dem,
         dir,
-        &SurfConfig::default(),
+        &crate::reference::reference_surf_config(),
         MAX_TILE_FEATURES,
         Smoothing {
             target_m: crate::reference::DEFAULT_SMOOTHING_M,
