@@ -62,6 +62,73 @@ fn eval_bars(e: &Value) -> String {
     }
 }
 
+/// The cells of one `trn` JSON in the Fig. 7 tables: matches, inliers, rotation, scale,
+/// max / mean registration error, position error (or why there was no fix).
+fn case_cells(t: &Value) -> String {
+    if t["fix"].as_bool() != Some(true) {
+        return format!(
+            "{} | – | no fix: {} | | | ",
+            t["matches"],
+            t["no_fix_reason"].as_str().unwrap_or("?")
+        );
+    }
+    format!(
+        "{} | {} | {} | {} | {} / {} | {}",
+        t["matches"],
+        t["inliers"],
+        f(t, "rotation_deg", 2),
+        f(t, "scale", 3),
+        f(t, "pos_err_max_px", 2),
+        f(t, "pos_err_mean_px", 2),
+        f(t, "pos_err_m", 1)
+    )
+}
+
+/// Run `ground-sim eval` of `tile` against `dem` (campaign settings of `a`) into `json` and
+/// return its table row, labelled `label`.
+fn eval_row(
+    a: &Args,
+    go: &dyn Fn(&[&str]) -> anyhow::Result<()>,
+    label: &str,
+    tile: &str,
+    dem: &str,
+    json: &str,
+) -> anyhow::Result<String> {
+    go(&[
+        "eval",
+        "--tile",
+        tile,
+        "--dem",
+        dem,
+        "--trials",
+        &a.trials.to_string(),
+        "--seed",
+        &a.seed.to_string(),
+        "--json",
+        json,
+    ])?;
+    let e = read(Path::new(json))?;
+    let pc = |k: &str| {
+        e[k].as_f64()
+            .map_or("–".into(), |x| format!("{:.1} %", 100.0 * x))
+    };
+    Ok(format!(
+        "| {label} | {} | {} | {} | {} | {} / {} | {} / {} | {} | {} | {} | {} |",
+        e["trials"],
+        pc("success_rate"),
+        pc("false_fix_rate"),
+        pc("no_fix_rate"),
+        f(&e, "pos_err_p50_m", 2),
+        f(&e, "pos_err_p95_m", 2),
+        f(&e, "heading_err_p95_deg", 3),
+        f(&e, "heading_err_max_deg", 3),
+        pc("scale_err_p95"),
+        pc("within_3sigma_frac"),
+        f(&e, "time_ms_mean", 2),
+        eval_bars(&e)
+    ))
+}
+
 /// Run `ground-sim results`; `dispatch` runs one ground-sim command line.
 pub fn run(a: &Args, dispatch: &dyn Fn(&[String]) -> anyhow::Result<()>) -> anyhow::Result<()> {
     let w = |s: &str| a.work.join(s).to_string_lossy().into_owned();
@@ -136,17 +203,7 @@ pub fn run(a: &Args, dispatch: &dyn Fn(&[String]) -> anyhow::Result<()>) -> anyh
             &w(&format!("case-{preset}-{rot}")),
         ])?;
         let t = read(Path::new(&json))?;
-        writeln!(
-            md,
-            "| {preset} | {rot}° | {} | {} | {} | {} | {} / {} | {} | {p} |",
-            t["matches"],
-            t["inliers"],
-            f(&t, "rotation_deg", 2),
-            f(&t, "scale", 3),
-            f(&t, "pos_err_max_px", 2),
-            f(&t, "pos_err_mean_px", 2),
-            f(&t, "pos_err_m", 1)
-        )?;
+        writeln!(md, "| {preset} | {rot}° | {} | {p} |", case_cells(&t))?;
     }
     writeln!(
         md,
@@ -165,41 +222,15 @@ pub fn run(a: &Args, dispatch: &dyn Fn(&[String]) -> anyhow::Result<()>) -> anyh
     )?;
     writeln!(md, "|---|---|---|---|---|---|---|---|---|---|---|")?;
     for preset in ["shoemaker", "shackleton"] {
-        let json = w(&format!("eval-{preset}.json"));
-        go(&[
-            "eval",
-            "--tile",
+        let row = eval_row(
+            a,
+            &go,
+            preset,
             &w(&format!("{preset}-ref")),
-            "--dem",
             &w(&format!("{preset}.tif")),
-            "--trials",
-            &a.trials.to_string(),
-            "--seed",
-            &seed,
-            "--json",
-            &json,
-        ])?;
-        let e = read(Path::new(&json))?;
-        let pc = |k: &str| {
-            e[k].as_f64()
-                .map_or("–".into(), |x| format!("{:.1} %", 100.0 * x))
-        };
-        writeln!(
-            md,
-            "| {preset} | {} | {} | {} | {} | {} / {} | {} / {} | {} | {} | {} | {} |",
-            e["trials"],
-            pc("success_rate"),
-            pc("false_fix_rate"),
-            pc("no_fix_rate"),
-            f(&e, "pos_err_p50_m", 2),
-            f(&e, "pos_err_p95_m", 2),
-            f(&e, "heading_err_p95_deg", 3),
-            f(&e, "heading_err_max_deg", 3),
-            pc("scale_err_p95"),
-            pc("within_3sigma_frac"),
-            f(&e, "time_ms_mean", 2),
-            eval_bars(&e)
+            &w(&format!("eval-{preset}.json")),
         )?;
+        writeln!(md, "{row}")?;
     }
     insar_section(&mut md, a, &go, &paper.map(|(p, r, _)| (p, r)))?;
     // Descent.
@@ -353,61 +384,18 @@ fn insar_section(
                 &w(&format!("trn-insar-{preset}-{rot}.png")),
             ])?;
             let t = read(Path::new(&json))?;
-            let row = if t["fix"].as_bool() == Some(false) {
-                format!(
-                    "| {preset} | {rot}° | {} | – | no fix: {} | | | |",
-                    t["matches"],
-                    t["no_fix_reason"].as_str().unwrap_or("?")
-                )
-            } else {
-                format!(
-                    "| {preset} | {rot}° | {} | {} | {} | {} | {} / {} | {} |",
-                    t["matches"],
-                    t["inliers"],
-                    f(&t, "rotation_deg", 2),
-                    f(&t, "scale", 3),
-                    f(&t, "pos_err_max_px", 2),
-                    f(&t, "pos_err_mean_px", 2),
-                    f(&t, "pos_err_m", 1)
-                )
-            };
+            let row = format!("| {preset} | {rot}° | {} |", case_cells(&t));
             writeln!(case_rows, "{row}")?;
         }
-        let json = w(&format!("eval-insar-{preset}.json"));
-        go(&[
-            "eval",
-            "--tile",
+        let row = eval_row(
+            a,
+            go,
+            &format!("{preset} (InSAR tile)"),
             &dir,
-            "--dem",
             &w(&format!("{preset}.tif")),
-            "--trials",
-            &a.trials.to_string(),
-            "--seed",
-            &seed,
-            "--json",
-            &json,
-        ])?;
-        let e = read(Path::new(&json))?;
-        let pc = |k: &str| {
-            e[k].as_f64()
-                .map_or("–".into(), |x| format!("{:.1} %", 100.0 * x))
-        };
-        writeln!(
-            eval_rows,
-            "| {preset} (InSAR tile) | {} | {} | {} | {} | {} / {} | {} / {} | {} | {} | {} | {} |",
-            e["trials"],
-            pc("success_rate"),
-            pc("false_fix_rate"),
-            pc("no_fix_rate"),
-            f(&e, "pos_err_p50_m", 2),
-            f(&e, "pos_err_p95_m", 2),
-            f(&e, "heading_err_p95_deg", 3),
-            f(&e, "heading_err_max_deg", 3),
-            pc("scale_err_p95"),
-            pc("within_3sigma_frac"),
-            f(&e, "time_ms_mean", 2),
-            eval_bars(&e)
+            &w(&format!("eval-insar-{preset}.json")),
         )?;
+        writeln!(eval_rows, "{row}")?;
     }
     writeln!(
         md,
