@@ -3,7 +3,7 @@
 
 use anyhow::{Context, Result, bail};
 use nav_core::surf::{Scratch, scratch_len};
-use nav_core::tile::{MAX_HEADER_LEN, TileHeader, tile_len, write_tile};
+use nav_core::tile::{MAX_HEADER_LEN, TileHeader, tile_len_with_raster, write_tile_with_raster};
 use nav_core::{Features, SlopeImage, SurfConfig, extract};
 
 /// Most features a ground-built tile holds: 8192 × 280 B = 2.2 MiB of flash. The flight matcher
@@ -55,7 +55,8 @@ pub fn tile_features(
 /// Build a tile blob from a slope image: features by nav-core (the strongest `max_features`, at
 /// most [`MAX_TILE_FEATURES`]), header from `grid`, `cfg` and the terrain smoothing σ the slope
 /// carries (`smoothing_m`, metres; see `nav_core::TileHeader::smoothing_m`; 0 for slope images
-/// that frames will be compared with as they are).
+/// that frames will be compared with as they are), and the slope image itself as the tile's
+/// reference raster (2 bytes per pixel), which the flyer's dense refinement aligns frames to.
 pub fn build_tile(
     slope: &SlopeImage<'_>,
     grid: &GeoGrid,
@@ -87,8 +88,9 @@ pub fn build_tile(
         upright: cfg.upright,
         smoothing_m: smoothing_m as f32,
     };
-    let mut buf = vec![0u8; tile_len(MAX_HEADER_LEN, feats.len())];
-    let len = write_tile(&header, feats, &mut buf)
+    let raster = slope.pixels();
+    let mut buf = vec![0u8; tile_len_with_raster(MAX_HEADER_LEN, feats.len(), raster.len())];
+    let len = write_tile_with_raster(&header, feats, Some(raster), &mut buf)
         .map_err(|e| anyhow::anyhow!("writing the tile: {e}"))?;
     buf.truncate(len);
     Ok(buf)

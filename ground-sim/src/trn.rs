@@ -38,6 +38,12 @@ pub struct TrnScore {
     pub matches: u16,
     /// Inliers.
     pub inliers: u16,
+    /// Whether the fix was refined densely against the tile's slope raster.
+    pub refined: bool,
+    /// Why a fix was not refined (it then stands as the features gave it).
+    pub refine_note: Option<String>,
+    /// Normalised cross-correlation of frame and reference slope under the refined transform.
+    pub ncc: Option<f32>,
     /// Estimated rotation, degrees.
     pub rotation_deg: Option<f64>,
     /// Heading error, degrees (wrapped to ±180).
@@ -92,6 +98,12 @@ pub fn score(
     };
     if let Ok(f) = run.report.outcome {
         fill_fix(&mut s, &f, h, pose, frame_w, frame_h, run);
+        match run.report.refine {
+            Some(Ok(r)) if f.refined => s.ncc = Some(r.ncc_after),
+            Some(Err(e)) => s.refine_note = Some(e.to_string()),
+            _ => {}
+        }
+        s.refined = f.refined;
     }
     s
 }

@@ -25,6 +25,7 @@ pub fn frame_result(frame_id: u32, r: &Result<FrameReport, NavError>) -> FrameRe
                     scale_sigma: f.scale_sigma,
                     inliers: f.inliers,
                     residual_rms_px: f.residual_rms_px,
+                    refined: f.refined,
                 }),
                 Err(n) => WireOutcome::NoFix(no_fix(*n)),
             },
@@ -76,6 +77,7 @@ pub fn no_fix(n: NoFix) -> WireNoFix {
         NoFix::ScaleOutOfRange => WireNoFix::ScaleOutOfRange,
         NoFix::ResidualTooLarge => WireNoFix::ResidualTooLarge,
         NoFix::InconsistentWithPrior => WireNoFix::InconsistentWithPrior,
+        NoFix::Unconfirmed => WireNoFix::Unconfirmed,
     }
 }
 

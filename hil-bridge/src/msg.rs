@@ -211,6 +211,8 @@ pub struct WireFix {
     pub inliers: u16,
     /// RMS transfer error of the inliers, tile px.
     pub residual_rms_px: f64,
+    /// The transform comes from the dense refinement over the frame's pixels.
+    pub refined: bool,
 }
 
 /// Why there is no fix (mirrors `nav_core::NoFix`).
@@ -233,6 +235,8 @@ pub enum WireNoFix {
     ResidualTooLarge,
     /// Inconsistent with the prior.
     InconsistentWithPrior,
+    /// Too few inliers and not confirmed by the dense slope correlation.
+    Unconfirmed,
 }
 
 /// Why the navigator refused a frame outright (mirrors `nav_core::NavError`, flattened).

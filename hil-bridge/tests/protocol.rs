@@ -85,7 +85,7 @@ fn golden() -> Vec<(u16, Message<'static>, &'static str)> {
 #[test]
 fn golden_vectors_encode_and_decode() {
     assert_eq!(
-        PROTOCOL_VERSION, 1,
+        PROTOCOL_VERSION, 2,
         "a version bump needs new golden vectors"
     );
     for (seq, msg, bytes) in golden() {
@@ -117,6 +117,7 @@ fn sample_fix() -> WireFix {
         scale_sigma: 3e-3,
         inliers: 12,
         residual_rms_px: 0.73,
+        refined: true,
     }
 }
 
@@ -370,7 +371,7 @@ fn target_assembles_a_clean_frame_exactly() {
     let mut input = wire(
         0,
         &Message::Hello(Hello {
-            version: 1,
+            version: PROTOCOL_VERSION,
             session: 5,
         }),
     );
@@ -463,7 +464,7 @@ fn faults_are_rejected_and_recovered_never_a_corrupted_frame() {
         let mut hello: &[u8] = &wire(
             0,
             &Message::Hello(Hello {
-                version: 1,
+                version: PROTOCOL_VERSION,
                 session: 1,
             }),
         );
@@ -540,7 +541,7 @@ fn a_payload_crc_mismatch_aborts_the_frame() {
     let mut input = wire(
         0,
         &Message::Hello(Hello {
-            version: 1,
+            version: PROTOCOL_VERSION,
             session: 1,
         }),
     );
@@ -584,7 +585,7 @@ fn oversized_and_out_of_order_frames_are_refused() {
     let mut input = wire(
         0,
         &Message::Hello(Hello {
-            version: 1,
+            version: PROTOCOL_VERSION,
             session: 1,
         }),
     );

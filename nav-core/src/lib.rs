@@ -63,6 +63,7 @@ pub mod matching;
 pub mod msac;
 pub mod navigator;
 pub mod pose;
+pub mod refine;
 pub mod rng;
 pub mod slope;
 pub mod surf;

@@ -5,6 +5,7 @@ use crate::frame::{DemPatch, FrameError, SlopeBuffer, SlopeImage};
 use crate::matching::{Match, MatchConfig, MatchStats, match_features};
 use crate::msac::{Affine, Correspondence, MsacConfig, msac};
 use crate::pose::{Fix, GateConfig, NoFix, make_fix};
+use crate::refine::{RefineConfig, RefineError, Refined, refine};
 use crate::surf::{Features, SurfConfig, SurfError, SurfWorkspace, extract};
 use crate::tile::Tile;
 use core::fmt;
@@ -66,6 +67,8 @@ pub struct NavConfig {
     /// frame and reference slopes come from terrain at the same resolution. Slope-image frames
     /// cannot be smoothed this way and are used as given.
     pub match_tile_smoothing: bool,
+    /// Dense refinement of every fix against the tile's slope raster (when it carries one).
+    pub refine: RefineConfig,
 }
 
 impl Default for NavConfig {
@@ -81,6 +84,7 @@ impl Default for NavConfig {
             fill_dropouts: true,
             bin_to_tile: true,
             match_tile_smoothing: true,
+            refine: RefineConfig::default(),
         }
     }
 }
@@ -137,6 +141,12 @@ pub struct FrameReport {
     pub match_stats: MatchStats,
     /// Detector counters for the frame.
     pub detect_stats: crate::detector::DetectStats,
+    /// The dense refinement of the fix: `None` when there was no feature fix to refine,
+    /// otherwise what it gave or why it was not applied (the fix then stands unrefined).
+    pub refine: Option<Result<Refined, RefineError>>,
+    /// The feature consensus had fewer than [`GateConfig::min_inliers`] inliers (but at least
+    /// [`GateConfig::min_inliers_verified`]): the fix stood only if the refinement confirmed it.
+    pub needed_confirmation: bool,
 }
 
 /// Caller-owned working memory for one frame: slope buffer, SURF scratch, up to `MAX_KP` frame
@@ -292,7 +302,16 @@ impl<'t> Navigator<'t> {
         let cfg = self.frame_surf_config(img.pixel_m());
         extract(&img, &cfg, surf.scratch(), features)?;
         features.unbin(k);
-        Ok(self.locate_features(ws, dem.width(), dem.height(), prior))
+        let mut report = self.locate_features(ws, dem.width(), dem.height(), prior);
+        self.refine_fix(
+            &mut report,
+            &ws.slope.image()?,
+            k,
+            dem.width(),
+            dem.height(),
+        );
+        self.prior_gate(&mut report, prior);
+        Ok(report)
     }
 
     /// Locate a slope image.
@@ -312,7 +331,63 @@ impl<'t> Navigator<'t> {
             let cfg = self.frame_surf_config(img.pixel_m());
             extract(img, &cfg, ws.surf.scratch(), &mut ws.features)?;
         }
-        Ok(self.locate_features(ws, img.width(), img.height(), prior))
+        let mut report = self.locate_features(ws, img.width(), img.height(), prior);
+        if k > 1 {
+            self.refine_fix(
+                &mut report,
+                &ws.slope.image()?,
+                k,
+                img.width(),
+                img.height(),
+            );
+        } else {
+            self.refine_fix(&mut report, img, 1, img.width(), img.height());
+        }
+        self.prior_gate(&mut report, prior);
+        Ok(report)
+    }
+
+    /// Refine a feature fix over the frame's pixels (`img` binned by `k` from the
+    /// `frame_w × frame_h` frame); an unrefinable fix stands as it was.
+    fn refine_fix(
+        &self,
+        report: &mut FrameReport,
+        img: &SlopeImage<'_>,
+        k: usize,
+        frame_w: usize,
+        frame_h: usize,
+    ) {
+        let Ok(fix) = &mut report.outcome else {
+            return;
+        };
+        let result = match self.tile.slope_raster() {
+            None if self.cfg.refine.enabled => Err(RefineError::NoRaster),
+            None => Err(RefineError::Disabled),
+            Some(raster) => refine(img, k, raster, &fix.affine, &self.cfg.refine),
+        };
+        if let Ok(r) = &result {
+            *fix = fix.with_refinement(r, self.tile.header(), frame_w, frame_h);
+        }
+        let confirmed = matches!(&result, Ok(r) if r.ncc_after >= self.cfg.gate.verify_min_ncc);
+        if report.needed_confirmation && !confirmed {
+            report.outcome = Err(NoFix::Unconfirmed);
+        }
+        report.refine = Some(result);
+    }
+
+    /// Refuse a fix farther from the prior than its gate allows.
+    fn prior_gate(&self, report: &mut FrameReport, prior: Option<&Prior>) {
+        if let (Ok(fix), Some(p)) = (&report.outcome, prior) {
+            let (dx, dy) = (
+                fix.center_tile_px[0] - p.center_tile_px[0] as f64,
+                fix.center_tile_px[1] - p.center_tile_px[1] as f64,
+            );
+            let var = (p.sigma_px as f64) * (p.sigma_px as f64) + fix.center_cov_tile_px2[0][0];
+            let gate = self.cfg.prior_gate_sigmas as f64;
+            if dx * dx + dy * dy > gate * gate * var {
+                report.outcome = Err(NoFix::InconsistentWithPrior);
+            }
+        }
     }
 
     /// Fill the correspondences from the match list and run MSAC on them.
@@ -408,6 +483,8 @@ impl<'t> Navigator<'t> {
             affine: None,
             match_stats: MatchStats::default(),
             detect_stats: ws.features.stats,
+            refine: None,
+            needed_confirmation: false,
         };
         ws.matches.clear();
         if feats.len() < self.cfg.gate.min_matches as usize {
@@ -479,26 +556,32 @@ impl<'t> Navigator<'t> {
             .zip(ws.inlier.iter())
             .filter(|(_, f)| **f)
             .map(|(p, _)| (p.x, p.y));
-        let mut outcome = make_fix(
+        let gate = &self.cfg.gate;
+        report.outcome = make_fix(
             &r,
             tile.header(),
             frame_w,
             frame_h,
-            &self.cfg.gate,
-            inlier_pts,
+            gate,
+            inlier_pts.clone(),
         );
-        if let (Ok(fix), Some(p)) = (&outcome, prior) {
-            let (dx, dy) = (
-                fix.center_tile_px[0] - p.center_tile_px[0] as f64,
-                fix.center_tile_px[1] - p.center_tile_px[1] as f64,
-            );
-            let var = (p.sigma_px as f64) * (p.sigma_px as f64) + fix.center_cov_tile_px2[0][0];
-            let gate = self.cfg.prior_gate_sigmas as f64;
-            if dx * dx + dy * dy > gate * gate * var {
-                outcome = Err(NoFix::InconsistentWithPrior);
-            }
+        let can_confirm = self.cfg.refine.enabled && tile.slope_raster().is_some();
+        // Thin or clustered consensus: a frame-wide correlation can still confirm it.
+        if matches!(
+            report.outcome,
+            Err(NoFix::TooFewInliers | NoFix::DegenerateGeometry)
+        ) && can_confirm
+            && gate.min_inliers_verified > 0
+            && r.inliers >= gate.min_inliers_verified
+        {
+            let relaxed = GateConfig {
+                min_inliers: gate.min_inliers_verified,
+                min_inlier_spread_px: 0.0,
+                ..*gate
+            };
+            report.outcome = make_fix(&r, tile.header(), frame_w, frame_h, &relaxed, inlier_pts);
+            report.needed_confirmation = report.outcome.is_ok();
         }
-        report.outcome = outcome;
         report
     }
 }

@@ -58,6 +58,13 @@ pub struct GateConfig {
     pub scale_min: f32,
     /// Accepted scale range, tile pixels per frame pixel.
     pub scale_max: f32,
+    /// Fewest inliers for a fix that the dense refinement confirms ([`crate::refine`]: applied,
+    /// with a correlation of at least `verify_min_ncc`). Between this and `min_inliers` the
+    /// feature consensus alone is too thin to trust; a frame-wide slope correlation is not.
+    /// 0 (or a tile without a slope raster) disables it.
+    pub min_inliers_verified: u16,
+    /// Smallest refined correlation that confirms a fix of fewer than `min_inliers` inliers.
+    pub verify_min_ncc: f32,
     /// Smallest spread of the inliers in the frame: the square root of the smaller eigenvalue of
     /// their covariance, frame pixels. Clustered or collinear inliers constrain rotation poorly.
     pub min_inlier_spread_px: f32,
@@ -68,6 +75,8 @@ impl Default for GateConfig {
         Self {
             min_matches: 5,
             min_inliers: 6,
+            min_inliers_verified: 3,
+            verify_min_ncc: 0.7,
             max_residual_rms_px: 1.5,
             max_non_similar: 0.08,
             scale_min: 0.2,
@@ -97,6 +106,8 @@ pub enum NoFix {
     ResidualTooLarge,
     /// The fix disagrees with the prior beyond its gate.
     InconsistentWithPrior,
+    /// Fewer than `min_inliers` inliers and the dense refinement did not confirm the fix.
+    Unconfirmed,
 }
 
 impl fmt::Display for NoFix {
@@ -110,6 +121,7 @@ impl fmt::Display for NoFix {
             Self::ScaleOutOfRange => "scale out of range",
             Self::ResidualTooLarge => "residual too large",
             Self::InconsistentWithPrior => "fix inconsistent with the prior",
+            Self::Unconfirmed => "too few inliers and not confirmed by the slope correlation",
         })
     }
 }
@@ -142,6 +154,48 @@ pub struct Fix {
     pub inliers: u16,
     /// RMS transfer error of the inliers, tile pixels.
     pub residual_rms_px: f64,
+    /// Whether `affine` (and everything derived from it) comes from the dense refinement over
+    /// the frame's pixels ([`crate::refine`]) rather than from the feature inliers alone. The
+    /// covariances stay those of the feature fix: an upper bound for the refined estimate, and
+    /// the one that measured consistent in closed loop (the refinement's own statistical
+    /// covariance is in [`crate::refine::Refined`]; see `docs/registration.md`).
+    pub refined: bool,
+}
+
+impl Fix {
+    /// The same fix with a refined transform: position, heading, rotation and scale follow the
+    /// refinement; the gate figures (`non_similar`, residual, inliers) and the covariances stay
+    /// those of the feature fix.
+    pub fn with_refinement(
+        &self,
+        r: &crate::refine::Refined,
+        header: &TileHeader<'_>,
+        frame_w: usize,
+        frame_h: usize,
+    ) -> Self {
+        let affine = r.affine;
+        let sim = similarity(&affine);
+
+        let (cx, cy) = ((frame_w as f64 - 1.0) * 0.5, (frame_h as f64 - 1.0) * 0.5);
+        let (tx, ty) = affine.apply(cx, cy);
+        let (gx, gy) = header.pixel_to_geo(tx, ty);
+        let mut heading = sim.rotation_rad;
+        if heading < 0.0 {
+            heading += core::f64::consts::TAU;
+        }
+        Self {
+            affine,
+            similarity: Similarity {
+                non_similar: self.similarity.non_similar,
+                ..sim
+            },
+            center_tile_px: [tx, ty],
+            center_geo_m: [gx, gy],
+            heading_rad: heading,
+            refined: true,
+            ..*self
+        }
+    }
 }
 
 /// Build a fix (or refuse one) from an MSAC result. `inlier_pts` yields the frame positions of
@@ -221,5 +275,6 @@ pub fn make_fix(
         scale_sigma: libm::sqrt(var_ab),
         inliers: r.inliers,
         residual_rms_px: r.residual_rms_px,
+        refined: false,
     })
 }

@@ -10,14 +10,17 @@
 //! | 8 | 2 | format version ([`TILE_FORMAT_VERSION`]) |
 //! | 10 | 2 | header length `H` in bytes |
 //! | 12 | 4 | feature count `N` |
-//! | 16 | H | header, postcard-encoded [`TileHeader`] |
-//! | 16 + H | pad | zeros up to a multiple of 4 |
+//! | 16 | 4 | slope raster pixels `R`: 0 (none) or width × height |
+//! | 20 | H | header, postcard-encoded [`TileHeader`] |
+//! | 20 + H | pad | zeros up to a multiple of 4 |
 //! | K | 24·N | keypoints ([`KEYPOINT_RECORD_LEN`] bytes each) |
 //! | K + 24·N | 256·N | descriptors (64 × `f32` each) |
+//! | K + 280·N | 2·R, padded to 4 | reference slope raster (raw [`SlopePx`], row-major) |
 //! | end − 4 | 4 | CRC-32 (ISO-HDLC, as zlib) of every byte before it |
 
 use crate::describe::{DESCRIPTOR_LEN, Descriptor};
 use crate::detector::{DetectorConfig, Keypoint};
+use crate::frame::{SLOPE_NODATA, SlopePx};
 use crate::surf::{Feature, SurfConfig};
 use core::fmt;
 use serde::{Deserialize, Serialize};
@@ -25,9 +28,11 @@ use serde::{Deserialize, Serialize};
 /// Magic bytes at offset 0.
 pub const TILE_MAGIC: [u8; 8] = *b"UMBRATIL";
 /// Format version this code reads and writes.
-pub const TILE_FORMAT_VERSION: u16 = 2;
+pub const TILE_FORMAT_VERSION: u16 = 3;
 /// Bytes before the header.
-pub const PREAMBLE_LEN: usize = 16;
+pub const PREAMBLE_LEN: usize = 20;
+/// Most raster pixels a tile may hold (a 16 384² map; 512 MiB, far beyond any flash).
+pub const MAX_RASTER_PX: usize = 1 << 28;
 /// Bytes per keypoint record: x, y, scale, orientation, response (`f32`), flags (`u32`).
 pub const KEYPOINT_RECORD_LEN: usize = 24;
 /// Bytes per descriptor.
@@ -197,9 +202,46 @@ const fn align4(n: usize) -> usize {
     (n + 3) & !3
 }
 
-/// Total blob length for a header of `header_len` bytes and `n` features.
+/// Total blob length for a header of `header_len` bytes and `n` features, without a raster.
 pub const fn tile_len(header_len: usize, n: usize) -> usize {
-    align4(PREAMBLE_LEN + header_len) + n * (KEYPOINT_RECORD_LEN + DESCRIPTOR_RECORD_LEN) + 4
+    tile_len_with_raster(header_len, n, 0)
+}
+
+/// Total blob length with a slope raster of `raster_px` pixels (0 = none).
+pub const fn tile_len_with_raster(header_len: usize, n: usize, raster_px: usize) -> usize {
+    align4(PREAMBLE_LEN + header_len)
+        + n * (KEYPOINT_RECORD_LEN + DESCRIPTOR_RECORD_LEN)
+        + align4(2 * raster_px)
+        + 4
+}
+
+/// The reference slope raster stored in a tile, read in place: `width × height` raw
+/// [`SlopePx`] values (degrees, 1/512° per unit, above 90° = no data), row-major, in tile pixel
+/// axes. It is the very image the tile's features were detected on.
+#[derive(Debug, Clone, Copy)]
+pub struct SlopeRaster<'a> {
+    bytes: &'a [u8],
+    width: usize,
+    height: usize,
+}
+
+impl SlopeRaster<'_> {
+    /// Width in pixels (the tile's).
+    pub fn width(&self) -> usize {
+        self.width
+    }
+    /// Height in pixels (the tile's).
+    pub fn height(&self) -> usize {
+        self.height
+    }
+    /// Pixel at `(col, row)`; [`SLOPE_NODATA`] outside.
+    #[inline]
+    pub fn get(&self, col: usize, row: usize) -> SlopePx {
+        if col >= self.width {
+            return SLOPE_NODATA;
+        }
+        rd_u16(self.bytes, 2 * (row * self.width + col)).map_or(SLOPE_NODATA, SlopePx::from_bits)
+    }
 }
 
 /// A validated tile, borrowing its bytes (e.g. straight from flash).
@@ -209,6 +251,7 @@ pub struct Tile<'a> {
     keypoints: &'a [u8],
     descriptors: &'a [u8],
     count: usize,
+    raster: Option<SlopeRaster<'a>>,
 }
 
 impl<'a> Tile<'a> {
@@ -235,10 +278,11 @@ impl<'a> Tile<'a> {
         }
         let header_len = rd_u16(bytes, 10).ok_or(bad_len)? as usize;
         let count = rd_u32(bytes, 12).ok_or(bad_len)? as usize;
-        if header_len > MAX_HEADER_LEN || count > MAX_TILE_FEATURES {
+        let raster_px = rd_u32(bytes, 16).ok_or(bad_len)? as usize;
+        if header_len > MAX_HEADER_LEN || count > MAX_TILE_FEATURES || raster_px > MAX_RASTER_PX {
             return Err(TileError::BadHeader);
         }
-        let expected = tile_len(header_len, count);
+        let expected = tile_len_with_raster(header_len, count, raster_px);
         if bytes.len() != expected {
             return Err(TileError::Truncated {
                 expected,
@@ -271,6 +315,9 @@ impl<'a> Tile<'a> {
             || header.projection.len() > MAX_PROJECTION_LEN
             || !detector_ok
             || !(0.0..=MAX_SMOOTHING_M).contains(&header.smoothing_m)
+            || (raster_px != 0
+                && Some(raster_px)
+                    != (header.width_px as usize).checked_mul(header.height_px as usize))
         {
             return Err(TileError::BadGeometry);
         }
@@ -280,11 +327,23 @@ impl<'a> Tile<'a> {
         let descriptors = bytes
             .get(d_start..d_start + count * DESCRIPTOR_RECORD_LEN)
             .ok_or(bad_len)?;
+        let r_start = d_start + count * DESCRIPTOR_RECORD_LEN;
+        // Any u16 is a valid raster value (above 90° reads as no data), so nothing to check.
+        let raster = if raster_px == 0 {
+            None
+        } else {
+            Some(SlopeRaster {
+                bytes: bytes.get(r_start..r_start + 2 * raster_px).ok_or(bad_len)?,
+                width: header.width_px as usize,
+                height: header.height_px as usize,
+            })
+        };
         let tile = Self {
             header,
             keypoints,
             descriptors,
             count,
+            raster,
         };
         let (w, h) = (header.width_px as f32, header.height_px as f32);
         for i in 0..count {
@@ -305,6 +364,10 @@ impl<'a> Tile<'a> {
     /// The header.
     pub fn header(&self) -> &TileHeader<'a> {
         &self.header
+    }
+    /// The reference slope raster, if the tile carries one.
+    pub fn slope_raster(&self) -> Option<&SlopeRaster<'a>> {
+        self.raster.as_ref()
     }
     /// Number of features.
     pub fn len(&self) -> usize {
@@ -371,15 +434,35 @@ impl<'a> Tile<'a> {
     }
 }
 
-/// Serialise a tile into `out`; returns the number of bytes written. No allocation: the ground
-/// side passes a `Vec` sized with [`tile_len`] (header length is known after encoding; passing
-/// `tile_len(MAX_HEADER_LEN, n)` bytes is always enough).
+/// Serialise a tile without a slope raster into `out`; returns the number of bytes written.
+/// No allocation: the ground side passes a `Vec` sized with [`tile_len`] (header length is
+/// known after encoding; passing `tile_len(MAX_HEADER_LEN, n)` bytes is always enough).
 pub fn write_tile(
     header: &TileHeader<'_>,
     features: &[Feature],
     out: &mut [u8],
 ) -> Result<usize, TileError> {
+    write_tile_with_raster(header, features, None, out)
+}
+
+/// [`write_tile`] with the reference slope raster (`width_px × height_px` pixels, row-major)
+/// the features were detected on; `out` needs
+/// `tile_len_with_raster(MAX_HEADER_LEN, n, width × height)` bytes.
+pub fn write_tile_with_raster(
+    header: &TileHeader<'_>,
+    features: &[Feature],
+    raster: Option<&[SlopePx]>,
+    out: &mut [u8],
+) -> Result<usize, TileError> {
     if features.len() > MAX_TILE_FEATURES || header.feature_count as usize != features.len() {
+        return Err(TileError::BadGeometry);
+    }
+    let raster_px = raster.map_or(0, <[SlopePx]>::len);
+    if let Some(r) = raster
+        && (r.is_empty()
+            || r.len() > MAX_RASTER_PX
+            || Some(r.len()) != (header.width_px as usize).checked_mul(header.height_px as usize))
+    {
         return Err(TileError::BadGeometry);
     }
     if header.projection.len() > MAX_PROJECTION_LEN
@@ -389,7 +472,7 @@ pub fn write_tile(
     }
     let n = features.len();
     let too_small = TileError::BufferTooSmall {
-        needed: tile_len(MAX_HEADER_LEN, n),
+        needed: tile_len_with_raster(MAX_HEADER_LEN, n, raster_px),
     };
     let hdr_area = out
         .get_mut(PREAMBLE_LEN..PREAMBLE_LEN + MAX_HEADER_LEN)
@@ -397,7 +480,7 @@ pub fn write_tile(
     let header_len = postcard::to_slice(header, hdr_area)
         .map_err(|_| TileError::BadHeader)?
         .len();
-    let total = tile_len(header_len, n);
+    let total = tile_len_with_raster(header_len, n, raster_px);
     let out = out.get_mut(..total).ok_or(too_small)?;
     fn put(out: &mut [u8], at: usize, bytes: &[u8]) {
         if let Some(dst) = out.get_mut(at..at + bytes.len()) {
@@ -408,6 +491,7 @@ pub fn write_tile(
     put(out, 8, &TILE_FORMAT_VERSION.to_le_bytes());
     put(out, 10, &(header_len as u16).to_le_bytes());
     put(out, 12, &(n as u32).to_le_bytes());
+    put(out, 16, &(raster_px as u32).to_le_bytes());
     let kp_start = align4(PREAMBLE_LEN + header_len);
     let pad = kp_start - PREAMBLE_LEN - header_len;
     put(
@@ -437,6 +521,14 @@ pub fn write_tile(
                 &v.to_le_bytes(),
             );
         }
+    }
+    let r_start = d_start + n * DESCRIPTOR_RECORD_LEN;
+    for (i, p) in raster.unwrap_or(&[]).iter().enumerate() {
+        put(out, r_start + 2 * i, &p.to_bits().to_le_bytes());
+    }
+    // Padding after an odd raster, so the CRC covers defined bytes.
+    if raster_px % 2 == 1 {
+        put(out, r_start + 2 * raster_px, &[0, 0]);
     }
     let crc = CRC.checksum(out.get(..total - 4).unwrap_or(&[]));
     put(out, total - 4, &crc.to_le_bytes());

@@ -1,7 +1,11 @@
 //! Tile format: golden bytes, round trip, and every kind of damage gives its typed error.
 
-use nav_core::tile::{TILE_FORMAT_VERSION, Tile, TileError, TileHeader, tile_len, write_tile};
+use nav_core::tile::{
+    TILE_FORMAT_VERSION, Tile, TileError, TileHeader, tile_len, tile_len_with_raster, write_tile,
+    write_tile_with_raster,
+};
 use nav_core::{DESCRIPTOR_LEN, Feature, Keypoint};
+use nav_core::{SLOPE_NODATA, SlopePx};
 use proptest::prelude::*;
 
 fn header(n: usize) -> TileHeader<'static> {
@@ -49,25 +53,76 @@ fn build(n: usize) -> Vec<u8> {
     buf
 }
 
+/// Slope raster for `header(_)`'s 200 × 150 pixels: a ramp with one no-data pixel.
+fn raster() -> Vec<SlopePx> {
+    let mut r: Vec<SlopePx> = (0..200 * 150)
+        .map(|i| SlopePx::from_bits((i % 46_080) as u16))
+        .collect();
+    r[777] = SLOPE_NODATA;
+    r
+}
+
+fn build_with_raster(n: usize) -> Vec<u8> {
+    let feats: Vec<Feature> = (0..n).map(feature).collect();
+    let mut buf = vec![0u8; tile_len_with_raster(512, n, 200 * 150)];
+    let len = write_tile_with_raster(&header(n), &feats, Some(&raster()), &mut buf).unwrap();
+    buf.truncate(len);
+    buf
+}
+
 fn hex(b: &[u8]) -> String {
     b.iter().map(|x| format!("{x:02x}")).collect()
 }
 
-/// The first 72 bytes (preamble, header start) and the CRC of a one-feature tile, as written by
-/// format version 2 (version 1 had no `smoothing_m`).
+/// The first 76 bytes (preamble, header start) and the CRC of a one-feature tile without a
+/// raster, as written by format version 3 (version 2 had no raster count in the preamble,
+/// version 1 no `smoothing_m`).
 /// A change here is a format change: bump `TILE_FORMAT_VERSION` and `docs/tile-format.md`.
-const GOLDEN_HEAD: &str = "554d42524154494c0200590001000000c8019601000000000066f24000000000005be340000000000000344000000000000034c024706f6c61722073746572656f67726170686963";
-const GOLDEN_CRC: &str = "16300ec0";
+const GOLDEN_HEAD: &str = "554d42524154494c030059000100000000000000c8019601000000000066f24000000000005be340000000000000344000000000000034c024706f6c61722073746572656f67726170686963";
+const GOLDEN_CRC: &str = "87f9f9a2";
 
 #[test]
 fn golden_bytes() {
     let t = build(1);
-    assert_eq!(t.len(), 392);
+    assert_eq!(t.len(), 396);
     assert_eq!(t.len(), tile_len(t[10] as usize | (t[11] as usize) << 8, 1));
     assert_eq!(&t[..8], b"UMBRATIL");
     assert_eq!(u16::from_le_bytes([t[8], t[9]]), TILE_FORMAT_VERSION);
-    assert_eq!(hex(&t[..72]), GOLDEN_HEAD);
+    assert_eq!(hex(&t[..76]), GOLDEN_HEAD);
     assert_eq!(hex(&t[t.len() - 4..]), GOLDEN_CRC);
+    // With the raster: its pixel count in the preamble, 2 bytes per pixel after the
+    // descriptors, and nothing else moves.
+    let r = build_with_raster(1);
+    assert_eq!(r.len(), 396 + 60_000);
+    assert_eq!(hex(&r[16..20]), "30750000");
+    assert_eq!(hex(&r[20..368]), hex(&t[20..368]));
+    assert_eq!(hex(&r[392..398]), "000001000200");
+    assert_eq!(hex(&r[r.len() - 4..]), GOLDEN_RASTER_CRC);
+}
+
+const GOLDEN_RASTER_CRC: &str = "b430b50a";
+
+#[test]
+fn raster_round_trips() {
+    let bytes = build_with_raster(3);
+    let tile = Tile::parse(&bytes).unwrap();
+    let r = tile.slope_raster().unwrap();
+    assert_eq!((r.width(), r.height()), (200, 150));
+    let want = raster();
+    for row in 0..150 {
+        for col in 0..200 {
+            assert_eq!(r.get(col, row), want[row * 200 + col]);
+        }
+    }
+    assert_eq!(r.get(200, 0), SLOPE_NODATA);
+    assert_eq!(r.get(0, 150), SLOPE_NODATA);
+    assert!(Tile::parse(&build(3)).unwrap().slope_raster().is_none());
+    // A raster of the wrong size is refused by the writer.
+    let mut buf = vec![0u8; tile_len_with_raster(512, 1, 200 * 150)];
+    assert_eq!(
+        write_tile_with_raster(&header(1), &[feature(0)], Some(&raster()[1..]), &mut buf),
+        Err(TileError::BadGeometry)
+    );
 }
 
 #[test]
@@ -121,7 +176,7 @@ fn damage_gives_typed_errors() {
         TileError::WrongVersion { found: 1 }
     );
     // A NaN or negative terrain smoothing (the header's last field) behind a valid checksum.
-    let h_end = 16 + (good[10] as usize | (good[11] as usize) << 8);
+    let h_end = 20 + (good[10] as usize | (good[11] as usize) << 8);
     for bad in [f32::NAN, -1.0, f32::INFINITY] {
         let mut b = good.clone();
         b[h_end - 4..h_end].copy_from_slice(&bad.to_le_bytes());
@@ -171,6 +226,20 @@ fn damage_gives_typed_errors() {
         Tile::parse(&buf[..len]).unwrap_err(),
         TileError::BadGeometry
     );
+    // A raster whose pixel count is not width × height, behind a consistent length and a valid
+    // checksum.
+    let mut b = build_with_raster(1);
+    let n = b.len();
+    b.truncate(n - 8);
+    b[16..20].copy_from_slice(&(200u32 * 150 - 2).to_le_bytes());
+    b.extend_from_slice(&[0; 4]);
+    reseal(&mut b);
+    assert_eq!(Tile::parse(&b).unwrap_err(), TileError::BadGeometry);
+    // A raster count the blob is too short for.
+    let mut b = build(1);
+    b[16..20].copy_from_slice(&(200u32 * 150).to_le_bytes());
+    reseal(&mut b);
+    assert!(matches!(Tile::parse(&b), Err(TileError::Truncated { .. })));
     // Writer buffer too small.
     let mut small = vec![0u8; 40];
     assert!(matches!(
@@ -186,8 +255,8 @@ proptest! {
     }
 
     #[test]
-    fn mutated_tiles_never_panic(pos in 0usize..2000, val in any::<u8>(), reseal_it in any::<bool>()) {
-        let mut b = build(5);
+    fn mutated_tiles_never_panic(pos in 0usize..2000, val in any::<u8>(), reseal_it in any::<bool>(), with_raster in any::<bool>()) {
+        let mut b = if with_raster { build_with_raster(5) } else { build(5) };
         let p = pos % b.len();
         b[p] = val;
         if reseal_it {

@@ -87,6 +87,10 @@ pub struct EvalSummary {
     pub time_ms_mean: f64,
     /// No-fix reasons and their counts.
     pub no_fix_reasons: std::collections::BTreeMap<String, usize>,
+    /// Fraction of fixes refined densely against the tile's slope raster.
+    pub refined_frac: f64,
+    /// Why fixes were not refined, and how often.
+    pub refine_notes: std::collections::BTreeMap<String, usize>,
     /// Frame pixel size range, metres.
     pub pixel_range_m: [f64; 2],
     /// Sensor model.
@@ -193,6 +197,12 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
             .entry(r.no_fix_reason.clone().unwrap_or_default())
             .or_insert(0) += 1;
     }
+    let mut refine_notes = std::collections::BTreeMap::new();
+    for r in &fixes {
+        if let Some(note) = &r.refine_note {
+            *refine_notes.entry(note.clone()).or_insert(0) += 1;
+        }
+    }
     let summary = EvalSummary {
         trials: rows.len(),
         seed: a.seed,
@@ -209,6 +219,8 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         within_3sigma_frac: within as f64 / fixes.len().max(1) as f64,
         time_ms_mean: rows.iter().map(|r| r.time_ms).sum::<f64>() / n,
         no_fix_reasons: reasons,
+        refined_frac: fixes.iter().filter(|r| r.refined).count() as f64 / fixes.len().max(1) as f64,
+        refine_notes,
         pixel_range_m: [a.pixel_min_m, a.pixel_max_m],
         sensor,
     };
@@ -238,6 +250,15 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
     if !summary.no_fix_reasons.is_empty() {
         println!("no fix      {:?}", summary.no_fix_reasons);
     }
+    println!(
+        "refined     {:.1} % of fixes{}",
+        summary.refined_frac * 100.0,
+        if summary.refine_notes.is_empty() {
+            String::new()
+        } else {
+            format!(" (not refined: {:?})", summary.refine_notes)
+        }
+    );
     super::write_json(&a.json, &summary)?;
     let csv_path = a
         .csv
@@ -249,7 +270,7 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
     );
     writeln!(
         csv,
-        "trial,x_m,y_m,heading_deg,pixel_m,fix,false_fix,features,matches,inliers,rotation_deg,heading_err_deg,scale,scale_truth,pos_err_m,center_err_px,reg_err_mean_px,reg_err_max_px,center_sigma_m,time_ms,no_fix_reason"
+        "trial,x_m,y_m,heading_deg,pixel_m,fix,false_fix,features,matches,inliers,rotation_deg,heading_err_deg,scale,scale_truth,pos_err_m,center_err_px,reg_err_mean_px,reg_err_max_px,center_sigma_m,time_ms,refined,ncc,refine_note,no_fix_reason"
     )?;
     let o = |v: Option<f64>| v.map_or(String::new(), |x| format!("{x:.6}"));
     for (i, r) in rows.iter().enumerate() {
@@ -261,7 +282,7 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         });
         writeln!(
             csv,
-            "{i},{:.3},{:.3},{:.4},{:.4},{},{},{},{},{},{},{},{},{:.6},{},{},{},{},{},{:.3},{}",
+            "{i},{:.3},{:.3},{:.4},{:.4},{},{},{},{},{},{},{},{},{:.6},{},{},{},{},{},{:.3},{},{},{},{}",
             t.x_m,
             t.y_m,
             t.heading_rad.to_degrees(),
@@ -281,6 +302,9 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
             o(r.pos_err_max_px),
             o(r.center_sigma_m),
             r.time_ms,
+            r.refined,
+            o(r.ncc.map(f64::from)),
+            r.refine_note.as_deref().unwrap_or(""),
             r.no_fix_reason.as_deref().unwrap_or("")
         )?;
     }

@@ -1,0 +1,728 @@
+//! Dense refinement of a feature fix: Gauss–Newton alignment of the frame's slope image to the
+//! tile's reference slope raster over a grid of frame pixels.
+//!
+//! Why: the feature fix rests on 10–30 keypoints whose positions scatter by ≈ 0.5 tile pixels
+//! (a keypoint is a blob centre, not a corner), so its rotation error is a few tenths of a
+//! degree on small frames. Every textured frame pixel carries information; aligning thousands of
+//! them brings rotation and position down by an order of magnitude. The feature fix stays the
+//! authority on *whether* there is a fix (it starts the refinement, and the refined transform
+//! may not stray from it); the refinement only sharpens it.
+//!
+//! Method: inverse-compositional Gauss–Newton (Baker & Matthews) with a similarity warp (frame
+//! pixels → tile pixels: rotation, scale, translation) and a linear photometric model
+//! `R ≈ g·F + o` between the frame slope `F` and the reference slope `R` (InSAR slopes are
+//! biased by height noise; binning and smoothing change contrast). Frame gradients come from
+//! central differences on the frame's own pixel grid, the reference is sampled bilinearly, and
+//! residuals are Huber-weighted at twice the previous pass' RMS so dropouts and craters that
+//! changed do not pull the fit.
+//!
+//! Bounds: at most [`MAX_ITERATIONS`] + 1 passes over at most [`RefineConfig::max_samples`]
+//! samples; no buffers (every sum is a register or stack scalar). Per-sample arithmetic is `f32`
+//! in a fixed order (summed per row, rows summed in `f64`), so host and target agree bit for bit.
+
+use crate::frame::{SLOPE_LSB_DEG, SlopeImage, SlopePx, slope_is_valid};
+use crate::msac::Affine;
+use crate::pose::similarity;
+use crate::tile::SlopeRaster;
+use core::fmt;
+use nalgebra::{SMatrix, SVector};
+
+/// Hard cap on Gauss–Newton iterations, whatever the configuration says.
+pub const MAX_ITERATIONS: u8 = 20;
+
+/// How much lower than under the feature fix the refined correlation may be. NCC is not the
+/// objective (the Huber-weighted photometric residual is), so a better alignment can correlate
+/// a hair worse: measured −0.0003 on a frame whose rotation error fell from 0.077° to 0.007°.
+pub const NCC_TOLERANCE: f32 = 0.01;
+
+/// Refinement settings.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct RefineConfig {
+    /// Run the refinement when the tile carries a slope raster.
+    pub enabled: bool,
+    /// Gauss–Newton iterations at most (capped at [`MAX_ITERATIONS`]).
+    pub max_iterations: u8,
+    /// Sample grid budget: the frame is sampled on a regular grid with the smallest stride that
+    /// keeps at most this many samples.
+    pub max_samples: u32,
+    /// Fewest valid samples (frame and reference both valid) for a refinement.
+    pub min_samples: u32,
+    /// Largest move of any frame corner, tile pixels, from the feature fix to the refined
+    /// transform. A feature fix on few inliers can be a few degrees off (corners several pixels
+    /// away) and the refinement rescues it; a much larger move means it slid into another
+    /// valley of the slope field.
+    pub max_shift_px: f32,
+    /// Smallest normalised cross-correlation of frame and reference slope under the refined
+    /// transform (measured on true alignments: 0.90–0.95 for truth-built tiles).
+    pub min_ncc: f32,
+    /// Converged when an update moves every frame corner by less than this, tile pixels.
+    pub converge_px: f32,
+}
+
+impl Default for RefineConfig {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            max_iterations: 20,
+            max_samples: 1100,
+            min_samples: 300,
+            max_shift_px: 12.0,
+            min_ncc: 0.5,
+            converge_px: 0.01,
+        }
+    }
+}
+
+/// Why a refinement was not applied (the feature fix then stands as it was).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum RefineError {
+    /// Switched off in the configuration.
+    Disabled,
+    /// The tile carries no slope raster.
+    NoRaster,
+    /// Fewer valid samples than [`RefineConfig::min_samples`].
+    TooFewSamples,
+    /// The normal equations are singular (a textureless frame).
+    Singular,
+    /// No convergence within the iteration budget.
+    NotConverged,
+    /// The refined transform moved a frame corner beyond [`RefineConfig::max_shift_px`].
+    MovedTooFar,
+    /// The refined alignment correlates worse than the feature fix (by more than
+    /// [`NCC_TOLERANCE`]) or less than [`RefineConfig::min_ncc`].
+    WorseCorrelation,
+}
+
+impl fmt::Display for RefineError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Self::Disabled => "refinement disabled",
+            Self::NoRaster => "tile has no slope raster",
+            Self::TooFewSamples => "too few valid samples",
+            Self::Singular => "frame has too little texture",
+            Self::NotConverged => "did not converge",
+            Self::MovedTooFar => "moved too far from the feature fix",
+            Self::WorseCorrelation => "correlation worse than the feature fix or too low",
+        })
+    }
+}
+
+/// A refined transform.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Refined {
+    /// Frame pixels → tile pixels, a similarity.
+    pub affine: Affine,
+    /// Gauss–Newton updates made.
+    pub iterations: u8,
+    /// Valid samples in the final pass.
+    pub samples: u32,
+    /// Normalised cross-correlation of frame and reference slope under the feature fix.
+    pub ncc_before: f32,
+    /// The same under the refined transform.
+    pub ncc_after: f32,
+    /// RMS of the photometric residual `R − (g·F + o)` in the final pass, degrees of slope.
+    pub residual_rms_deg: f32,
+    /// Largest move of a frame corner from the feature fix, tile pixels.
+    pub shift_px: f32,
+    /// Covariance of the frame centre, tile pixels² (row-major 2 × 2): the Gauss–Newton
+    /// covariance σ²·H⁻¹ of the final pass, inflated for residuals correlated between
+    /// neighbouring samples (see [`Refined::correlation`]). It describes the alignment noise
+    /// only, not errors of the reference itself (an InSAR DEM's local height errors shift the
+    /// whole frame alike); measured on 500-frame campaigns (seed 1): mean NEES 0.6 against
+    /// truth-built tiles, 2.8 and 8 against the two InSAR tiles (2 is consistent). The fix keeps
+    /// the feature covariance.
+    pub center_cov_tile_px2: [[f64; 2]; 2],
+    /// Standard deviation of the rotation, radians (same model).
+    pub rotation_sigma_rad: f64,
+    /// Standard deviation of the scale, tile pixels per frame pixel (same model).
+    pub scale_sigma: f64,
+    /// Correlation ρ of the residuals of neighbouring samples along a row (clamped to 0–0.9);
+    /// the covariances are inflated by (1 + ρ)/(1 − ρ), the variance factor of a mean of
+    /// first-order correlated samples.
+    pub correlation: f32,
+}
+
+/// Similarity warp in centred frame coordinates: `X = M·(u − c) + t`, tile pixels.
+#[derive(Clone, Copy)]
+struct Warp {
+    m: [[f64; 2]; 2],
+    t: [f64; 2],
+}
+
+impl Warp {
+    fn apply(&self, x: f64, y: f64) -> (f64, f64) {
+        (
+            self.m[0][0] * x + self.m[0][1] * y + self.t[0],
+            self.m[1][0] * x + self.m[1][1] * y + self.t[1],
+        )
+    }
+}
+
+/// Sums of one pass.
+struct Pass {
+    /// Upper triangle of the normal matrix, row by row.
+    h: [f64; 21],
+    b: [f64; 6],
+    n: u32,
+    sf: f64,
+    sr: f64,
+    sff: f64,
+    srr: f64,
+    sfr: f64,
+    see: f64,
+    /// Σ e·e' over horizontally neighbouring valid samples.
+    slag: f64,
+}
+
+/// Index of `(i, j)`, `i ≤ j`, in a row-by-row upper triangle of a 6 × 6 matrix.
+fn tri(i: usize, j: usize) -> usize {
+    let (i, j) = (i.min(j), i.max(j));
+    i * 6 - i * i.saturating_sub(1) / 2 + (j - i)
+}
+
+impl Pass {
+    fn normal_matrix(&self) -> SMatrix<f64, 6, 6> {
+        SMatrix::from_fn(|i, j| self.h.get(tri(i, j)).copied().unwrap_or(0.0))
+    }
+    fn rhs(&self) -> SVector<f64, 6> {
+        SVector::from_fn(|i, _| self.b.get(i).copied().unwrap_or(0.0))
+    }
+    fn ncc(&self) -> f32 {
+        let n = self.n as f64;
+        if n < 2.0 {
+            return 0.0;
+        }
+        let vf = self.sff - self.sf * self.sf / n;
+        let vr = self.srr - self.sr * self.sr / n;
+        let c = self.sfr - self.sf * self.sr / n;
+        if vf > 0.0 && vr > 0.0 {
+            (c / libm::sqrt(vf * vr)) as f32
+        } else {
+            0.0
+        }
+    }
+    fn lag_correlation(&self) -> f32 {
+        if self.see > 0.0 {
+            ((self.slag / self.see) as f32).clamp(0.0, 0.9)
+        } else {
+            0.0
+        }
+    }
+    fn rms(&self) -> f32 {
+        if self.n == 0 {
+            0.0
+        } else {
+            libm::sqrt(self.see / self.n as f64) as f32
+        }
+    }
+}
+
+#[inline]
+fn deg(p: SlopePx) -> Option<f32> {
+    slope_is_valid(p).then(|| p.to_bits() as f32 * SLOPE_LSB_DEG)
+}
+
+/// Bilinear reference slope at tile pixel `(x, y)`, degrees; `None` unless all four
+/// neighbours are valid.
+#[inline]
+fn bilinear(r: &SlopeRaster<'_>, x: f32, y: f32) -> Option<f32> {
+    if !(x >= 0.0 && y >= 0.0) {
+        return None;
+    }
+    let (x0, y0) = (libm::floorf(x), libm::floorf(y));
+    let (c, row) = (x0 as usize, y0 as usize);
+    if c + 1 >= r.width() || row + 1 >= r.height() {
+        return None;
+    }
+    let (fx, fy) = (x - x0, y - y0);
+    let a = deg(r.get(c, row))?;
+    let b = deg(r.get(c + 1, row))?;
+    let cc = deg(r.get(c, row + 1))?;
+    let d = deg(r.get(c + 1, row + 1))?;
+    let top = a + fx * (b - a);
+    let bot = cc + fx * (d - cc);
+    Some(top + fy * (bot - top))
+}
+
+/// Sample grid stride: the smallest with at most `budget` samples over `w × h` interior pixels.
+fn stride(w: usize, h: usize, budget: u32) -> usize {
+    let budget = budget.max(1) as usize;
+    let mut s = 1usize;
+    // Bounded: the count falls below 1 at s = max(w, h).
+    while s < w.max(h) && w.div_ceil(s) * h.div_ceil(s) > budget {
+        s += 1;
+    }
+    s
+}
+
+fn pass(
+    frame: &SlopeImage<'_>,
+    raster: &SlopeRaster<'_>,
+    warp: &Warp,
+    st: usize,
+    centre: (f32, f32),
+    photo: (f32, f32),
+    huber: f32,
+) -> Pass {
+    let (w, h) = (frame.width(), frame.height());
+    let m = [
+        [warp.m[0][0] as f32, warp.m[0][1] as f32],
+        [warp.m[1][0] as f32, warp.m[1][1] as f32],
+    ];
+    let t = [warp.t[0] as f32, warp.t[1] as f32];
+    let (g, o) = photo;
+    let mut out = Pass {
+        h: [0.0; 21],
+        b: [0.0; 6],
+        n: 0,
+        sf: 0.0,
+        sr: 0.0,
+        sff: 0.0,
+        srr: 0.0,
+        sfr: 0.0,
+        see: 0.0,
+        slag: 0.0,
+    };
+    let half = st / 2;
+    let mut v = 1 + half;
+    while v + 1 < h {
+        let mut hr = [0.0f32; 21];
+        let mut br = [0.0f32; 6];
+        let (mut sf, mut sr, mut sff, mut srr, mut sfr, mut see) =
+            (0.0f32, 0.0f32, 0.0f32, 0.0f32, 0.0f32, 0.0f32);
+        let (mut slag, mut prev) = (0.0f32, None::<f32>);
+        let mut u = 1 + half;
+        while u + 1 < w {
+            let sample = (|| {
+                let f = deg(frame.get(u, v))?;
+                let fx = 0.5 * (deg(frame.get(u + 1, v))? - deg(frame.get(u - 1, v))?);
+                let fy = 0.5 * (deg(frame.get(u, v + 1))? - deg(frame.get(u, v - 1))?);
+                let (x, y) = (u as f32 - centre.0, v as f32 - centre.1);
+                let px = m[0][0] * x + m[0][1] * y + t[0];
+                let py = m[1][0] * x + m[1][1] * y + t[1];
+                let r = bilinear(raster, px, py)?;
+                Some((f, fx, fy, x, y, r))
+            })();
+            u += st;
+            let Some((f, fx, fy, x, y, r)) = sample else {
+                prev = None;
+                continue;
+            };
+            let e = r - (g * f + o);
+            if let Some(p) = prev {
+                slag += p * e;
+            }
+            prev = Some(e);
+            let ae = libm::fabsf(e);
+            let wt = if ae > huber { huber / ae } else { 1.0 };
+            let s = [
+                g * (fx * x + fy * y),
+                g * (fy * x - fx * y),
+                g * fx,
+                g * fy,
+                f,
+                1.0,
+            ];
+            let mut hk = hr.iter_mut();
+            for (i, (si, bi)) in s.iter().zip(br.iter_mut()).enumerate() {
+                let wsi = wt * si;
+                *bi += wsi * e;
+                for (sj, hij) in s.iter().skip(i).zip(hk.by_ref()) {
+                    *hij += wsi * sj;
+                }
+            }
+            sf += f;
+            sr += r;
+            sff += f * f;
+            srr += r * r;
+            sfr += f * r;
+            see += e * e;
+            out.n += 1;
+        }
+        for (t, r) in out.b.iter_mut().zip(br) {
+            *t += r as f64;
+        }
+        for (t, r) in out.h.iter_mut().zip(hr) {
+            *t += r as f64;
+        }
+        out.sf += sf as f64;
+        out.sr += sr as f64;
+        out.sff += sff as f64;
+        out.srr += srr as f64;
+        out.sfr += sfr as f64;
+        out.see += see as f64;
+        out.slag += slag as f64;
+        v += st;
+    }
+    out
+}
+
+/// Refine `initial` (frame pixels → tile pixels) by aligning `frame` to `raster`.
+///
+/// `frame` is the slope image the features came from, `bin` the binning factor between it and
+/// the frame pixel coordinates of `initial` (frame pixel `x = bin·u + (bin − 1)/2` for image
+/// column `u`; 1 when unbinned). The result maps frame pixels (unbinned) to tile pixels.
+pub fn refine(
+    frame: &SlopeImage<'_>,
+    bin: usize,
+    raster: &SlopeRaster<'_>,
+    initial: &Affine,
+    cfg: &RefineConfig,
+) -> Result<Refined, RefineError> {
+    if !cfg.enabled {
+        return Err(RefineError::Disabled);
+    }
+    let (w, h) = (frame.width(), frame.height());
+    if w < 3 || h < 3 {
+        return Err(RefineError::TooFewSamples);
+    }
+    let k = bin.max(1) as f64;
+    let off = (k - 1.0) * 0.5;
+    let (uc, vc) = ((w as f64 - 1.0) * 0.5, (h as f64 - 1.0) * 0.5);
+    // Start from the nearest similarity, anchored at the frame centre: the warp family only
+    // composes similarities, so any shear of the feature affine would otherwise stay frozen in.
+    let sim = similarity(initial);
+    let (sn, cs) = (libm::sin(sim.rotation_rad), libm::cos(sim.rotation_rad));
+    let sk = sim.scale * k;
+    let (cx, cy) = initial.apply(k * uc + off, k * vc + off);
+    let start = Warp {
+        m: [[sk * cs, -sk * sn], [sk * sn, sk * cs]],
+        t: [cx, cy],
+    };
+    let mut warp = start;
+    let corners = [(-uc, -vc), (uc, -vc), (-uc, vc), (uc, vc)];
+    let moved = |a: &Warp, b: &Warp| {
+        corners.iter().fold(0.0f64, |acc, &(x, y)| {
+            let (ax, ay) = a.apply(x, y);
+            let (bx, by) = b.apply(x, y);
+            acc.max(libm::hypot(ax - bx, ay - by))
+        })
+    };
+    let st = stride(w.saturating_sub(2), h.saturating_sub(2), cfg.max_samples);
+    let centre = (uc as f32, vc as f32);
+    let (mut g, mut o) = (1.0f32, 0.0f32);
+    let mut huber = f32::INFINITY;
+    let iters = cfg.max_iterations.min(MAX_ITERATIONS);
+    let mut ncc_before = 0.0f32;
+    let mut converged = false;
+    let mut done = 0u8;
+    let last = loop {
+        let p = pass(frame, raster, &warp, st, centre, (g, o), huber);
+        if p.n < cfg.min_samples.max(8) {
+            return Err(RefineError::TooFewSamples);
+        }
+        if done == 0 {
+            ncc_before = p.ncc();
+        }
+        if converged || done >= iters {
+            break p;
+        }
+        huber = (2.0 * p.rms()).max(1e-3);
+        let Some(chol) = p.normal_matrix().cholesky() else {
+            return Err(RefineError::Singular);
+        };
+        let z: [f64; 6] = chol.solve(&p.rhs()).into();
+        let [z0, z1, dx, dy, dg, d_o] = z;
+        let (da, db) = (1.0 + z0, z1);
+        let det = da * da + db * db;
+        if !(det > 1e-6 && z.iter().all(|v| v.is_finite())) {
+            return Err(RefineError::Singular);
+        }
+        // W ← W ∘ W_q⁻¹ with W_q(x) = S·x + d, S = [[da, −db], [db, da]].
+        let si = [[da / det, db / det], [-db / det, da / det]];
+        let mm = &warp.m;
+        let m = [
+            [
+                mm[0][0] * si[0][0] + mm[0][1] * si[1][0],
+                mm[0][0] * si[0][1] + mm[0][1] * si[1][1],
+            ],
+            [
+                mm[1][0] * si[0][0] + mm[1][1] * si[1][0],
+                mm[1][0] * si[0][1] + mm[1][1] * si[1][1],
+            ],
+        ];
+        let next = Warp {
+            m,
+            t: [
+                warp.t[0] - (m[0][0] * dx + m[0][1] * dy),
+                warp.t[1] - (m[1][0] * dx + m[1][1] * dy),
+            ],
+        };
+        converged = moved(&next, &warp) < cfg.converge_px as f64;
+        warp = next;
+        g += dg as f32;
+        o += d_o as f32;
+        done += 1;
+    };
+    if !converged {
+        return Err(RefineError::NotConverged);
+    }
+    let shift = moved(&warp, &start);
+    if !(shift <= cfg.max_shift_px as f64) {
+        return Err(RefineError::MovedTooFar);
+    }
+    let ncc_after = last.ncc();
+    if !(ncc_after >= ncc_before - NCC_TOLERANCE && ncc_after >= cfg.min_ncc) {
+        return Err(RefineError::WorseCorrelation);
+    }
+    // Covariance of (da, db, dx, dy, g, o) from the final pass, inflated for correlation.
+    let Some(inv) = last.normal_matrix().cholesky().map(|c| c.inverse()) else {
+        return Err(RefineError::Singular);
+    };
+    let rho = last.lag_correlation() as f64;
+    let inflate = (1.0 + rho) / (1.0 - rho);
+    let sigma2 = last.see / (last.n as f64 - 6.0).max(1.0) * inflate;
+    let cv = |i: usize, j: usize| sigma2 * inv.get((i, j)).copied().unwrap_or(f64::NAN);
+    // The centre moves by −M·d: covariance M·Σ_dd·Mᵀ.
+    let m = &warp.m;
+    let sdd = [[cv(2, 2), cv(2, 3)], [cv(3, 2), cv(3, 3)]];
+    let mut cov = [[0.0f64; 2]; 2];
+    for (i, row) in cov.iter_mut().enumerate() {
+        for (j, v) in row.iter_mut().enumerate() {
+            let (mi, mj) = (
+                m.get(i).copied().unwrap_or_default(),
+                m.get(j).copied().unwrap_or_default(),
+            );
+            *v = mi[0] * (sdd[0][0] * mj[0] + sdd[0][1] * mj[1])
+                + mi[1] * (sdd[1][0] * mj[0] + sdd[1][1] * mj[1]);
+        }
+    }
+    let scale_now = libm::hypot(m[0][0], m[1][0]) / k;
+    // Back to unbinned frame pixels: u = (x − off)/k.
+    let (m, t) = (warp.m, warp.t);
+    let (a, b, c, d) = (m[0][0] / k, m[0][1] / k, m[1][0] / k, m[1][1] / k);
+    let (u0, v0) = (uc + off / k, vc + off / k);
+    let affine = Affine {
+        m1: a,
+        n1: b,
+        p1: t[0] - m[0][0] * u0 - m[0][1] * v0,
+        m2: c,
+        n2: d,
+        p2: t[1] - m[1][0] * u0 - m[1][1] * v0,
+    };
+    Ok(Refined {
+        affine,
+        iterations: done,
+        samples: last.n,
+        ncc_before,
+        ncc_after,
+        residual_rms_deg: last.rms(),
+        shift_px: shift as f32,
+        center_cov_tile_px2: cov,
+        rotation_sigma_rad: libm::sqrt(cv(1, 1).max(0.0)),
+        scale_sigma: scale_now * libm::sqrt(cv(0, 0).max(0.0)),
+        correlation: rho as f32,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::frame::{SLOPE_NODATA, slope_from_deg};
+    use crate::tile::{Tile, TileHeader, tile_len_with_raster, write_tile_with_raster};
+    use std::vec;
+    use std::vec::Vec;
+
+    const W: usize = 96;
+
+    /// Smooth, textured slope field in degrees at tile pixel `(x, y)`.
+    fn field(x: f64, y: f64) -> f64 {
+        20.0 + 6.0 * libm::sin(0.21 * x + 0.4) * libm::cos(0.17 * y - 0.3)
+            + 4.0 * libm::sin(0.09 * x - 0.13 * y)
+            + 3.0 * libm::cos(0.31 * y + 0.05 * x)
+    }
+
+    fn tile_bytes(raster: Option<&[SlopePx]>) -> Vec<u8> {
+        let header = TileHeader {
+            width_px: W as u32,
+            height_px: W as u32,
+            origin_x_m: 0.0,
+            origin_y_m: 0.0,
+            pixel_x_m: 20.0,
+            pixel_y_m: -20.0,
+            projection: "test",
+            feature_count: 0,
+            octaves: 3,
+            layers: 4,
+            threshold: 1.0,
+            min_scale_px: 0.0,
+            upright: false,
+            smoothing_m: 0.0,
+        };
+        let mut buf = vec![0u8; tile_len_with_raster(512, 0, W * W)];
+        let n = write_tile_with_raster(&header, &[], raster, &mut buf).unwrap();
+        buf.truncate(n);
+        buf
+    }
+
+    fn reference() -> Vec<SlopePx> {
+        (0..W * W)
+            .map(|i| slope_from_deg(field((i % W) as f64, (i / W) as f64) as f32))
+            .collect()
+    }
+
+    /// A 60 × 60 frame seeing the field through `truth` (frame px → tile px).
+    fn frame(truth: &Affine) -> Vec<SlopePx> {
+        (0..60 * 60)
+            .map(|i| {
+                let (x, y) = truth.apply((i % 60) as f64, (i / 60) as f64);
+                slope_from_deg(field(x, y) as f32)
+            })
+            .collect()
+    }
+
+    fn similarity_at(deg: f64, s: f64, tx: f64, ty: f64) -> Affine {
+        let (sn, cs) = (libm::sin(deg.to_radians()), libm::cos(deg.to_radians()));
+        Affine {
+            m1: s * cs,
+            n1: -s * sn,
+            p1: tx,
+            m2: s * sn,
+            n2: s * cs,
+            p2: ty,
+        }
+    }
+
+    #[test]
+    fn recovers_a_perturbed_similarity() {
+        let bytes = tile_bytes(Some(&reference()));
+        let tile = Tile::parse(&bytes).unwrap();
+        let truth = similarity_at(30.0, 0.8, 40.0, 20.0);
+        let px = frame(&truth);
+        let img = SlopeImage::new_checked(&px, 60, 60, 16.0).unwrap();
+        // Start 1.5° and 1 px off, with 1 % scale error.
+        let start = similarity_at(31.5, 0.808, 41.0, 19.2);
+        let r = refine(
+            &img,
+            1,
+            tile.slope_raster().unwrap(),
+            &start,
+            &RefineConfig::default(),
+        )
+        .unwrap();
+        let sim = similarity(&r.affine);
+        assert!(
+            (sim.rotation_rad.to_degrees() - 30.0).abs() < 0.02,
+            "{sim:?}"
+        );
+        assert!((sim.scale / 0.8 - 1.0).abs() < 1e-3, "{sim:?}");
+        for (x, y) in [(0.0, 0.0), (59.0, 59.0), (30.0, 10.0)] {
+            let (a, b) = r.affine.apply(x, y);
+            let (c, d) = truth.apply(x, y);
+            assert!(libm::hypot(a - c, b - d) < 0.05, "({x}, {y})");
+        }
+        assert!(r.ncc_after > r.ncc_before && r.ncc_after > 0.99, "{r:?}");
+    }
+
+    #[test]
+    fn binned_frames_map_back_to_frame_pixels() {
+        let bytes = tile_bytes(Some(&reference()));
+        let tile = Tile::parse(&bytes).unwrap();
+        // A 120 px frame binned by 2 into the 60 px image: image column u is frame x = 2u + 0.5.
+        let truth_binned = similarity_at(-20.0, 0.9, 50.0, 30.0);
+        let px = frame(&truth_binned);
+        let img = SlopeImage::new_checked(&px, 60, 60, 18.0).unwrap();
+        // The same map on frame pixels: x = 2u + 0.5 → u = (x − 0.5)/2.
+        let t = &truth_binned;
+        let truth = Affine {
+            m1: t.m1 / 2.0,
+            n1: t.n1 / 2.0,
+            p1: t.p1 - 0.25 * (t.m1 + t.n1),
+            m2: t.m2 / 2.0,
+            n2: t.n2 / 2.0,
+            p2: t.p2 - 0.25 * (t.m2 + t.n2),
+        };
+        let start = Affine {
+            p1: truth.p1 + 0.7,
+            ..truth
+        };
+        let r = refine(
+            &img,
+            2,
+            tile.slope_raster().unwrap(),
+            &start,
+            &RefineConfig::default(),
+        )
+        .unwrap();
+        for (x, y) in [(0.0, 0.0), (119.0, 119.0)] {
+            let (a, b) = r.affine.apply(x, y);
+            let (c, d) = truth.apply(x, y);
+            assert!(libm::hypot(a - c, b - d) < 0.05, "({x}, {y})");
+        }
+    }
+
+    #[test]
+    fn refuses_what_it_cannot_do() {
+        let reference = reference();
+        let truth = similarity_at(10.0, 0.8, 40.0, 20.0);
+        let px = frame(&truth);
+        let img = SlopeImage::new_checked(&px, 60, 60, 16.0).unwrap();
+        let bytes = tile_bytes(Some(&reference));
+        let tile = Tile::parse(&bytes).unwrap();
+        let raster = tile.slope_raster().unwrap();
+        let cfg = RefineConfig::default();
+        // Switched off.
+        let off = RefineConfig {
+            enabled: false,
+            ..cfg
+        };
+        assert_eq!(
+            refine(&img, 1, raster, &truth, &off),
+            Err(RefineError::Disabled)
+        );
+        // A flat frame against a flat reference: nothing to align.
+        let flat_ref = vec![slope_from_deg(12.0); W * W];
+        let flat_bytes = tile_bytes(Some(&flat_ref));
+        let flat_tile = Tile::parse(&flat_bytes).unwrap();
+        let flat = vec![slope_from_deg(12.0); 60 * 60];
+        let flat_img = SlopeImage::new_checked(&flat, 60, 60, 16.0).unwrap();
+        assert!(
+            refine(
+                &flat_img,
+                1,
+                flat_tile.slope_raster().unwrap(),
+                &truth,
+                &cfg
+            )
+            .is_err()
+        );
+        // A frame of no data, or a start that puts the frame outside the tile.
+        let empty = vec![SLOPE_NODATA; 60 * 60];
+        let empty_img = SlopeImage::new_checked(&empty, 60, 60, 16.0).unwrap();
+        assert_eq!(
+            refine(&empty_img, 1, raster, &truth, &cfg),
+            Err(RefineError::TooFewSamples)
+        );
+        let outside = similarity_at(10.0, 0.8, 4000.0, 20.0);
+        assert_eq!(
+            refine(&img, 1, raster, &outside, &cfg),
+            Err(RefineError::TooFewSamples)
+        );
+        // A start far from the truth (a wrong fix) must not be "confirmed": it either fails or
+        // is refused for moving too far or correlating too little.
+        let wrong = similarity_at(10.0, 0.8, 70.0, 60.0);
+        let r = refine(&img, 1, raster, &wrong, &cfg);
+        if let Ok(r) = r {
+            let (a, b) = r.affine.apply(30.0, 30.0);
+            let (c, d) = truth.apply(30.0, 30.0);
+            assert!(libm::hypot(a - c, b - d) < 0.1, "{r:?}");
+        }
+        // Degenerate affine starts (zero or non-finite scale) never panic.
+        let zero = Affine {
+            m1: 0.0,
+            n1: 0.0,
+            m2: 0.0,
+            n2: 0.0,
+            ..truth
+        };
+        assert!(refine(&img, 1, raster, &zero, &cfg).is_err());
+        let nan = Affine {
+            m1: f64::NAN,
+            ..truth
+        };
+        assert!(refine(&img, 1, raster, &nan, &cfg).is_err());
+    }
+}
