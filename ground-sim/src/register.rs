@@ -227,6 +227,12 @@ pub struct RegisterReport {
     pub heading_sigma_deg: Option<f64>,
     /// RMS transfer error of the inliers, reference pixels.
     pub residual_rms_px: Option<f64>,
+    /// Whether the fix was refined densely over the frame's pixels (`nav_core::refine`).
+    pub refined: bool,
+    /// Normalised cross-correlation of frame and reference slope under the refined transform.
+    pub refined_ncc: Option<f32>,
+    /// Why the refinement was not applied, when it was not.
+    pub refine_note: Option<String>,
     /// Time of the onboard part (slope, SURF, matching, MSAC, gate) on this host, ms.
     pub time_ms: f64,
     /// Time to build the reference tile, ms.
@@ -309,6 +315,9 @@ pub fn register(
         center_sigma_px: None,
         heading_sigma_deg: None,
         residual_rms_px: None,
+        refined: false,
+        refined_ncc: None,
+        refine_note: None,
         time_ms,
         tile_build_ms,
         pairs,
@@ -323,6 +332,12 @@ pub fn register(
         out.center_sigma_px = Some(f.center_cov_tile_px2[0][0].sqrt());
         out.heading_sigma_deg = Some(f.heading_sigma_rad.to_degrees());
         out.residual_rms_px = Some(f.residual_rms_px);
+        out.refined = f.refined;
+    }
+    match report.refine {
+        Some(Ok(r)) => out.refined_ncc = Some(r.ncc_after),
+        Some(Err(e)) => out.refine_note = Some(e.to_string()),
+        None => {}
     }
     Ok(out)
 }

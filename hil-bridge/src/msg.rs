@@ -235,7 +235,7 @@ pub enum WireNoFix {
     ResidualTooLarge,
     /// Inconsistent with the prior.
     InconsistentWithPrior,
-    /// Too few inliers and not confirmed by the dense slope correlation.
+    /// Not confirmed (or contradicted) by the dense slope correlation.
     Unconfirmed,
 }
 

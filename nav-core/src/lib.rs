@@ -19,8 +19,11 @@
 //!    least-squares affine on the inliers (eq 18).
 //! 8. [`pose`]: rotation and scale (eq 19), position in tile pixels and geo metres, covariance,
 //!    and the quality gate (`Fix` or a typed [`pose::NoFix`]).
-//! 9. [`navigator::Navigator`]: one call per frame with a caller-owned [`navigator::NavWorkspace`].
-//! 10. [`filter::NavFilter`]: error-state Kalman filter fusing IMU propagation with the fixes.
+//! 9. [`refine`]: the fix aligned over every frame pixel (on a sample grid) to the tile's
+//!    reference slope raster (Gauss–Newton, similarity and photometric gain/offset); thin
+//!    consensus confirmed, contradicted fixes refused.
+//! 10. [`navigator::Navigator`]: one call per frame with a caller-owned [`navigator::NavWorkspace`].
+//! 11. [`filter::NavFilter`]: error-state Kalman filter fusing IMU propagation with the fixes.
 //!
 //! ## Rules this crate keeps
 //!

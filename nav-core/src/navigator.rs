@@ -368,8 +368,14 @@ impl<'t> Navigator<'t> {
         if let Ok(r) = &result {
             *fix = fix.with_refinement(r, self.tile.header(), frame_w, frame_h);
         }
-        let confirmed = matches!(&result, Ok(r) if r.ncc_after >= self.cfg.gate.verify_min_ncc);
-        if report.needed_confirmation && !confirmed {
+        let gate = &self.cfg.gate;
+        let confirmed = matches!(&result, Ok(r) if r.ncc_after >= gate.verify_min_ncc);
+        let contradicted = match &result {
+            Ok(r) => r.ncc_after < gate.verify_min_ncc,
+            Err(e) => matches!(e, RefineError::MovedTooFar | RefineError::WorseCorrelation),
+        };
+        if (report.needed_confirmation && !confirmed) || (gate.reject_contradicted && contradicted)
+        {
             report.outcome = Err(NoFix::Unconfirmed);
         }
         report.refine = Some(result);

@@ -69,7 +69,7 @@ impl Default for RefineConfig {
             min_samples: 300,
             max_shift_px: 12.0,
             min_ncc: 0.5,
-            converge_px: 0.01,
+            converge_px: 0.03,
         }
     }
 }

@@ -116,6 +116,13 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
             r.residual_rms_px.unwrap_or(f64::NAN),
             r.non_similar.unwrap_or(f64::NAN)
         );
+        match (r.refined, r.refined_ncc, &r.refine_note) {
+            (true, Some(ncc), _) => println!(
+                "refined    over the frame's pixels against the reference slope (correlation {ncc:.3})"
+            ),
+            (_, _, Some(note)) => println!("refined    no: {note} (feature fix as is)"),
+            _ => {}
+        }
     }
     println!(
         "time       {:.2} ms onboard chain (+{:.1} ms building the tile)",

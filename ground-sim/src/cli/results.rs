@@ -149,7 +149,9 @@ pub fn run(a: &Args, dispatch: &dyn Fn(&[String]) -> anyhow::Result<()>) -> anyh
          Every figure below comes from that run; rerun it to reproduce or update them. Reference tiles here are built \
          from the truth DEM at 20 m with the default 40 m terrain smoothing (`ground-sim tile`, a perfect InSAR; the flyer smooths its frames alike), \
          except in the section on the InSAR reference, whose tiles come out of the simulated radar (`ground-sim insar`); frames are synthesised from the truth DEM at \
-         10 m with 0.5 m range noise and 0.5 % dropouts (`ground-sim trn`).\n",
+         10 m with 0.5 m range noise and 0.5 % dropouts (`ground-sim trn`). \
+         The onboard chain is the flight code's defaults: SURF, matching and MSAC give the feature fix, which is then refined over the frame's pixels \
+         against the tile's slope raster and refused where that slope correlation contradicts it (`nav_core::refine`, docs/registration.md).\n",
         a.seed, a.trials, a.runs
     )?;
     // The paper's four cases.
@@ -336,7 +338,7 @@ fn insar_section(
     writeln!(md, "\n## Against the InSAR reference (the product)\n")?;
     writeln!(
         md,
-        "Each preset through `ground-sim insar` (SAR echoes, focusing, interferogram, DEM at 20 m, tile with the same 40 m terrain smoothing; radar without thermal noise, the paper's echo model), then the Fig. 7 frames and an `eval` campaign (same seed and frames as above) against that tile. Frames still come from the truth DEM, as the flyer's sensor sees the real terrain.\n"
+        "Each preset through `ground-sim insar` (SAR echoes, focusing, interferogram, DEM at 20 m, tile with 50 m terrain smoothing and detector threshold 0.003, `ground_sim::reference::INSAR_*`; radar without thermal noise, the paper's echo model), then the Fig. 7 frames and an `eval` campaign (same seed and frames as above) against that tile. Frames still come from the truth DEM, as the flyer's sensor sees the real terrain.\n"
     )?;
     let mut dem_rows = String::new();
     let mut case_rows = String::new();

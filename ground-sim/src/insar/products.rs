@@ -135,10 +135,10 @@ pub fn write_outputs(
     let tile = write_reference(
         &p.dem,
         dir,
-        &crate::reference::reference_surf_config(),
+        &crate::reference::insar_surf_config(),
         MAX_TILE_FEATURES,
         Smoothing {
-            target_m: crate::reference::DEFAULT_SMOOTHING_M,
+            target_m: crate::reference::INSAR_SMOOTHING_M,
             inherent_m: p.config.inherent_smoothing_m(),
         },
     )
