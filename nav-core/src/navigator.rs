@@ -144,8 +144,9 @@ pub struct FrameReport {
     /// The dense refinement of the fix: `None` when there was no feature fix to refine,
     /// otherwise what it gave or why it was not applied (the fix then stands unrefined).
     pub refine: Option<Result<Refined, RefineError>>,
-    /// The feature consensus had fewer than [`GateConfig::min_inliers`] inliers (but at least
-    /// [`GateConfig::min_inliers_verified`]): the fix stood only if the refinement confirmed it.
+    /// The feature consensus alone failed the gate (fewer than [`GateConfig::min_inliers`]
+    /// inliers but at least [`GateConfig::min_inliers_verified`], or clustered inliers): the
+    /// fix stood only if the refinement confirmed it.
     pub needed_confirmation: bool,
 }
 

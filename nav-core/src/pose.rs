@@ -59,9 +59,10 @@ pub struct GateConfig {
     /// Accepted scale range, tile pixels per frame pixel.
     pub scale_max: f32,
     /// Fewest inliers for a fix that the dense refinement confirms ([`crate::refine`]: applied,
-    /// with a correlation of at least `verify_min_ncc`). Between this and `min_inliers` the
-    /// feature consensus alone is too thin to trust; a frame-wide slope correlation is not.
-    /// 0 (or a tile without a slope raster) disables it.
+    /// with a correlation of at least `verify_min_ncc`). Between this and `min_inliers`, or
+    /// with inliers too clustered for `min_inlier_spread_px`, the feature consensus alone is
+    /// too thin to trust; a frame-wide slope correlation is not. 0 (or a tile without a slope
+    /// raster) disables it.
     pub min_inliers_verified: u16,
     /// Smallest refined correlation that confirms a fix of fewer than `min_inliers` inliers.
     pub verify_min_ncc: f32,
