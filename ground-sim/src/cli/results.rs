@@ -28,6 +28,45 @@ pub struct Args {
     pub seed: u64,
 }
 
+/// Run `ground-sim trn` for one Fig. 7 case (`rot_deg`) of `tile` against `dem`, writing
+/// `{stem}.json` and `{stem}.png` (and the frame and reference images to `export`), and return
+/// its JSON.
+fn trn_case(
+    go: &dyn Fn(&[&str]) -> anyhow::Result<()>,
+    seed: &str,
+    tile: &str,
+    dem: &str,
+    rot_deg: f64,
+    stem: &str,
+    export: Option<&str>,
+) -> anyhow::Result<Value> {
+    let (json, png, rot) = (
+        format!("{stem}.json"),
+        format!("{stem}.png"),
+        rot_deg.to_string(),
+    );
+    let mut args = vec![
+        "trn",
+        "--tile",
+        tile,
+        "--dem",
+        dem,
+        "--heading-deg",
+        &rot,
+        "--seed",
+        seed,
+        "--json",
+        &json,
+        "--png",
+        &png,
+    ];
+    if let Some(dir) = export {
+        args.extend(["--export", dir]);
+    }
+    go(&args)?;
+    read(Path::new(&json))
+}
+
 fn read(p: &Path) -> anyhow::Result<Value> {
     let t = std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?;
     Ok(serde_json::from_str(&t)?)
@@ -186,25 +225,15 @@ pub fn run(a: &Args, dispatch: &dyn Fn(&[String]) -> anyhow::Result<()>) -> anyh
         ])?;
     }
     for (preset, rot, p) in paper {
-        let json = w(&format!("trn-{preset}-{rot}.json"));
-        go(&[
-            "trn",
-            "--tile",
-            &w(&format!("{preset}-ref")),
-            "--dem",
-            &w(&format!("{preset}.tif")),
-            "--heading-deg",
-            &rot.to_string(),
-            "--seed",
+        let t = trn_case(
+            &go,
             &seed,
-            "--json",
-            &json,
-            "--png",
-            &w(&format!("trn-{preset}-{rot}.png")),
-            "--export",
-            &w(&format!("case-{preset}-{rot}")),
-        ])?;
-        let t = read(Path::new(&json))?;
+            &w(&format!("{preset}-ref")),
+            &w(&format!("{preset}.tif")),
+            rot,
+            &w(&format!("trn-{preset}-{rot}")),
+            Some(&w(&format!("case-{preset}-{rot}"))),
+        )?;
         writeln!(md, "| {preset} | {rot}° | {} | {p} |", case_cells(&t))?;
     }
     writeln!(
@@ -369,23 +398,15 @@ fn insar_section(
             r["tile_features"]
         )?;
         for &(_, rot) in cases.iter().filter(|(p, _)| *p == preset) {
-            let json = w(&format!("trn-insar-{preset}-{rot}.json"));
-            go(&[
-                "trn",
-                "--tile",
-                &dir,
-                "--dem",
-                &w(&format!("{preset}.tif")),
-                "--heading-deg",
-                &rot.to_string(),
-                "--seed",
+            let t = trn_case(
+                go,
                 &seed,
-                "--json",
-                &json,
-                "--png",
-                &w(&format!("trn-insar-{preset}-{rot}.png")),
-            ])?;
-            let t = read(Path::new(&json))?;
+                &dir,
+                &w(&format!("{preset}.tif")),
+                rot,
+                &w(&format!("trn-insar-{preset}-{rot}")),
+                None,
+            )?;
             let row = format!("| {preset} | {rot}° | {} |", case_cells(&t));
             writeln!(case_rows, "{row}")?;
         }
