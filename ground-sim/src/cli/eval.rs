@@ -37,15 +37,9 @@ pub struct Args {
     /// Largest frame pixel size, metres.
     #[arg(long, default_value_t = 11.0)]
     pub pixel_max_m: f64,
-    /// Frame side, pixels.
-    #[arg(long, default_value_t = 200)]
-    pub size_px: usize,
-    /// Range noise 1σ, metres.
-    #[arg(long, default_value_t = SensorModel::default().range_noise_m)]
-    pub noise_m: f64,
-    /// Fraction of dropped pixels.
-    #[arg(long, default_value_t = SensorModel::default().dropout_frac)]
-    pub dropout: f64,
+    /// The flyer's ranging sensor.
+    #[command(flatten)]
+    pub sensor: super::SensorArgs,
     /// Summary JSON.
     #[arg(long)]
     pub json: PathBuf,
@@ -117,13 +111,7 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
     let reference = load(&a.tile)?;
     let tile = Tile::parse(&reference.tile_bytes).map_err(|e| anyhow!("{e}"))?;
     let dem = read_geotiff(&a.dem).with_context(|| format!("reading {}", a.dem.display()))?;
-    let sensor = SensorModel {
-        width_px: a.size_px,
-        height_px: a.size_px,
-        range_noise_m: a.noise_m,
-        dropout_frac: a.dropout,
-        ..SensorModel::default()
-    };
+    let sensor = a.sensor.model();
     // Frame centres: inside both the tile and the DEM, a frame's reach from every edge.
     let h = tile.header();
     let (tx0, ty0) = h.pixel_to_geo(0.0, 0.0);
@@ -135,7 +123,7 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
     if !(x1 > x0 && y1 > y0) {
         bail!(
             "the tile and DEM overlap leaves no room for a {}-px frame at {} m",
-            a.size_px,
+            a.sensor.size_px,
             a.pixel_max_m
         );
     }

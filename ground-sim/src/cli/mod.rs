@@ -114,3 +114,30 @@ pub fn print_stats(title: &str, s: &ground_sim::analysis::DemStats) {
         println!("  {k:<24} {v}");
     }
 }
+
+/// The flyer's ranging sensor as `trn` and `eval` take it on the command line.
+#[derive(Debug, Clone, clap::Args)]
+pub struct SensorArgs {
+    /// Frame side, pixels.
+    #[arg(long, default_value_t = 200)]
+    pub size_px: usize,
+    /// Range noise 1σ, metres.
+    #[arg(long, default_value_t = ground_sim::frames::SensorModel::default().range_noise_m)]
+    pub noise_m: f64,
+    /// Fraction of dropped pixels.
+    #[arg(long, default_value_t = ground_sim::frames::SensorModel::default().dropout_frac)]
+    pub dropout: f64,
+}
+
+impl SensorArgs {
+    /// The sensor model these flags describe (square frames, other settings default).
+    pub fn model(&self) -> ground_sim::frames::SensorModel {
+        ground_sim::frames::SensorModel {
+            width_px: self.size_px,
+            height_px: self.size_px,
+            range_noise_m: self.noise_m,
+            dropout_frac: self.dropout,
+            ..ground_sim::frames::SensorModel::default()
+        }
+    }
+}

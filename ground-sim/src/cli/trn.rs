@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use anyhow::{Context, anyhow};
 use ground_sim::dem::read_geotiff;
-use ground_sim::frames::{FramePose, SensorModel};
+use ground_sim::frames::FramePose;
 use ground_sim::reference::load;
 use ground_sim::trn::check_frame;
 use nav_core::Tile;
@@ -30,15 +30,9 @@ pub struct Args {
     /// Frame pixel size, metres (the paper: 10).
     #[arg(long, default_value_t = 10.0)]
     pub pixel_m: f64,
-    /// Frame side, pixels.
-    #[arg(long, default_value_t = 200)]
-    pub size_px: usize,
-    /// Range noise 1σ, metres.
-    #[arg(long, default_value_t = SensorModel::default().range_noise_m)]
-    pub noise_m: f64,
-    /// Fraction of dropped pixels.
-    #[arg(long, default_value_t = SensorModel::default().dropout_frac)]
-    pub dropout: f64,
+    /// The flyer's ranging sensor.
+    #[command(flatten)]
+    pub sensor: super::SensorArgs,
     /// Noise seed.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -70,13 +64,7 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         heading_rad: a.heading_deg.to_radians(),
         pixel_m: a.pixel_m,
     };
-    let sensor = SensorModel {
-        width_px: a.size_px,
-        height_px: a.size_px,
-        range_noise_m: a.noise_m,
-        dropout_frac: a.dropout,
-        ..SensorModel::default()
-    };
+    let sensor = a.sensor.model();
     let check = check_frame(&dem, &tile, &pose, &sensor, a.seed)?;
     let (frame, run, s) = (&check.frame, &check.run, &check.score);
     println!(
