@@ -44,6 +44,9 @@ pub struct TrnScore {
     pub refine_note: Option<String>,
     /// Normalised cross-correlation of frame and reference slope under the refined transform.
     pub ncc: Option<f32>,
+    /// The refinement's own statistical 1σ of the centre per axis, metres (`Refined`'s
+    /// covariance; the fix itself reports the feature covariance in `center_sigma_m`).
+    pub refined_sigma_m: Option<f64>,
     /// Estimated rotation, degrees.
     pub rotation_deg: Option<f64>,
     /// Heading error, degrees (wrapped to ±180).
@@ -99,7 +102,11 @@ pub fn score(
     if let Ok(f) = run.report.outcome {
         fill_fix(&mut s, &f, h, pose, frame_w, frame_h, run);
         match run.report.refine {
-            Some(Ok(r)) if f.refined => s.ncc = Some(r.ncc_after),
+            Some(Ok(r)) if f.refined => {
+                s.ncc = Some(r.ncc_after);
+                let c = r.center_cov_tile_px2;
+                s.refined_sigma_m = Some((0.5 * (c[0][0] + c[1][1])).max(0.0).sqrt() * h.pixel_m());
+            }
             Some(Err(e)) => s.refine_note = Some(e.to_string()),
             _ => {}
         }

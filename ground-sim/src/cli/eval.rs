@@ -83,6 +83,10 @@ pub struct EvalSummary {
     pub no_fix_reasons: std::collections::BTreeMap<String, usize>,
     /// Fraction of fixes refined densely against the tile's slope raster.
     pub refined_frac: f64,
+    /// Mean of (centre error / refinement's own σ per axis)² over refined correct fixes: 2 if
+    /// the refinement's statistical covariance were consistent (the fixes report the feature
+    /// covariance; see docs/registration.md).
+    pub refined_nees_mean: f64,
     /// Why fixes were not refined, and how often.
     pub refine_notes: std::collections::BTreeMap<String, usize>,
     /// Frame pixel size range, metres.
@@ -209,6 +213,13 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         no_fix_reasons: reasons,
         refined_frac: fixes.iter().filter(|r| r.refined).count() as f64 / fixes.len().max(1) as f64,
         refine_notes,
+        refined_nees_mean: {
+            let v: Vec<f64> = good
+                .iter()
+                .filter_map(|r| Some((r.pos_err_m? / r.refined_sigma_m?).powi(2)))
+                .collect();
+            v.iter().sum::<f64>() / v.len().max(1) as f64
+        },
         pixel_range_m: [a.pixel_min_m, a.pixel_max_m],
         sensor,
     };
@@ -239,8 +250,9 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         println!("no fix      {:?}", summary.no_fix_reasons);
     }
     println!(
-        "refined     {:.1} % of fixes{}",
+        "refined     {:.1} % of fixes (their own covariance: mean NEES {:.2}, 2 = consistent){}",
         summary.refined_frac * 100.0,
+        summary.refined_nees_mean,
         if summary.refine_notes.is_empty() {
             String::new()
         } else {
@@ -258,7 +270,7 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
     );
     writeln!(
         csv,
-        "trial,x_m,y_m,heading_deg,pixel_m,fix,false_fix,features,matches,inliers,rotation_deg,heading_err_deg,scale,scale_truth,pos_err_m,center_err_px,reg_err_mean_px,reg_err_max_px,center_sigma_m,time_ms,refined,ncc,refine_note,no_fix_reason"
+        "trial,x_m,y_m,heading_deg,pixel_m,fix,false_fix,features,matches,inliers,rotation_deg,heading_err_deg,scale,scale_truth,pos_err_m,center_err_px,reg_err_mean_px,reg_err_max_px,center_sigma_m,time_ms,refined,ncc,refined_sigma_m,refine_note,no_fix_reason"
     )?;
     let o = |v: Option<f64>| v.map_or(String::new(), |x| format!("{x:.6}"));
     for (i, r) in rows.iter().enumerate() {
@@ -270,7 +282,7 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         });
         writeln!(
             csv,
-            "{i},{:.3},{:.3},{:.4},{:.4},{},{},{},{},{},{},{},{},{:.6},{},{},{},{},{},{:.3},{},{},{},{}",
+            "{i},{:.3},{:.3},{:.4},{:.4},{},{},{},{},{},{},{},{},{:.6},{},{},{},{},{},{:.3},{},{},{},{},{}",
             t.x_m,
             t.y_m,
             t.heading_rad.to_degrees(),
@@ -292,6 +304,7 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
             r.time_ms,
             r.refined,
             o(r.ncc.map(f64::from)),
+            o(r.refined_sigma_m),
             r.refine_note.as_deref().unwrap_or(""),
             r.no_fix_reason.as_deref().unwrap_or("")
         )?;
