@@ -177,7 +177,7 @@ fn real_shackleton_files_read() {
         let d = read_geotiff(&dir.join(name)).unwrap();
         assert_eq!((d.width(), d.height()), (256, 256), "{name}");
         assert_eq!(d.pixel_m().unwrap(), px, "{name}");
-        let s = ground_sim::analysis::dem_stats(&d).unwrap();
+        let s = ground_sim::dem::stats::dem_stats(&d).unwrap();
         assert!(s.elev_min_m >= lo && s.elev_max_m <= hi, "{name}: {s:?}");
     }
 }

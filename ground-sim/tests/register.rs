@@ -141,7 +141,7 @@ fn register_generated_dems_and_slopes() {
 
     // The same as slope GeoTIFFs (what the ground segment's tile is made from).
     let slope = |d: &Dem| {
-        let s = ground_sim::analysis::slope_deg(d).unwrap();
+        let s = ground_sim::dem::stats::slope_deg(d).unwrap();
         Dem::new(d.width(), d.height(), s, d.geo.clone()).unwrap()
     };
     let (rs, fs) = (

@@ -5,7 +5,7 @@
 
 use std::process::Command;
 
-use ground_sim::analysis::dem_stats;
+use ground_sim::dem::stats::dem_stats;
 use ground_sim::terrain::{Preset, TerrainParams, Window, generate};
 use indicatif::ProgressBar;
 

@@ -3,7 +3,7 @@
 //! frame at 10 m rotated by 30°.
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use ground_sim::tile::{GeoGrid, build_tile};
+use ground_sim::reference::tile::{GeoGrid, build_tile};
 use nav_core::{DemPatch, NavConfig, NavWorkspace, Navigator, SurfConfig, Tile};
 use std::hint::black_box;
 use umbra_tests::{CraterField, FramePose, render_dem};

@@ -5,7 +5,7 @@
 //! Registration error is measured against the true transform at every inlier's frame position,
 //! in reference pixels (stricter than the residuals against the matched keypoints, also printed).
 
-use ground_sim::tile::{GeoGrid, build_tile};
+use ground_sim::reference::tile::{GeoGrid, build_tile};
 use nav_core::{NavConfig, NavWorkspace, Navigator, NoFix, Prior, SlopeImage, SurfConfig, Tile};
 use umbra_tests::{
     CraterField, FramePose, SplitMix64, add_slope_noise, render_slope, resample_slope,
@@ -57,7 +57,7 @@ fn reference() -> (Vec<nav_core::SlopePx>, Vec<u8>) {
         &img,
         &grid,
         &SurfConfig::default(),
-        ground_sim::tile::MAX_TILE_FEATURES,
+        ground_sim::reference::tile::MAX_TILE_FEATURES,
         // Slope frames are compared as given: no terrain smoothing.
         0.0,
     )

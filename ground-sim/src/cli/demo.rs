@@ -16,7 +16,8 @@ use std::time::Instant;
 
 use anyhow::{Context, anyhow};
 use ground_sim::dem::SampleKind;
-use ground_sim::frames::{FramePose, SensorModel};
+use ground_sim::evaluation::trn::{TrnScore, check_frame};
+use ground_sim::flyer::frames::{FramePose, SensorModel};
 use ground_sim::insar::InsarConfig;
 use ground_sim::insar::pipeline::process_simulated;
 use ground_sim::insar::products::{InsarReport, RunContext, SarSummary, write_outputs};
@@ -26,7 +27,6 @@ use ground_sim::sar::cli::RadarArgs;
 use ground_sim::sar::pipeline::{SimOptions, simulate_with};
 use ground_sim::sar::products::write_products;
 use ground_sim::terrain::{Preset, TerrainParams};
-use ground_sim::trn::{TrnScore, check_frame};
 use nav_core::Tile;
 
 /// Arguments of `ground-sim demo`.

@@ -6,10 +6,10 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 
 use anyhow::{Context, anyhow, bail};
 use ground_sim::dem::read_geotiff;
-use ground_sim::descent::{DescentConfig, RunResult, fly};
-use ground_sim::frames::{centre_extent, frame_reach_m};
-use ground_sim::onboard::{WORKSPACE_STACK, new_workspace};
-use ground_sim::plot::{Plot, Series, Style};
+use ground_sim::evaluation::descent::{DescentConfig, RunResult, fly};
+use ground_sim::flyer::frames::{centre_extent, frame_reach_m};
+use ground_sim::flyer::onboard::{WORKSPACE_STACK, new_workspace};
+use ground_sim::pictures::plot::{Plot, Series, Style};
 use ground_sim::reference::load;
 use nav_core::{NavConfig, Navigator, Tile};
 use rand::{RngExt, SeedableRng};

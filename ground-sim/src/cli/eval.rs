@@ -7,10 +7,12 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 
 use anyhow::{Context, anyhow, bail};
 use ground_sim::dem::read_geotiff;
-use ground_sim::frames::{FramePose, SensorModel, centre_extent, frame_reach_m, synth_frame};
-use ground_sim::onboard::{FrameInput, WORKSPACE_STACK, new_workspace, run_frame};
+use ground_sim::evaluation::trn::{TrnScore, score};
+use ground_sim::flyer::frames::{
+    FramePose, SensorModel, centre_extent, frame_reach_m, synth_frame,
+};
+use ground_sim::flyer::onboard::{FrameInput, WORKSPACE_STACK, new_workspace, run_frame};
 use ground_sim::reference::load;
-use ground_sim::trn::{TrnScore, score};
 use nav_core::{NavConfig, Navigator, Tile};
 use rand::{RngExt, SeedableRng};
 use rayon::prelude::*;

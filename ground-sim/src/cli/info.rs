@@ -3,9 +3,9 @@
 use std::path::PathBuf;
 
 use anyhow::Context;
-use ground_sim::analysis::dem_stats;
 use ground_sim::dem::read_geotiff;
-use ground_sim::render::write_pictures;
+use ground_sim::dem::stats::dem_stats;
+use ground_sim::pictures::render::write_pictures;
 
 /// Arguments of `ground-sim info`.
 #[derive(Debug, clap::Args)]

@@ -52,7 +52,7 @@ pub fn ensure_parent(path: &Path) -> anyhow::Result<()> {
 }
 
 /// Print DEM statistics as a two-column table.
-pub fn print_stats(title: &str, s: &ground_sim::analysis::DemStats) {
+pub fn print_stats(title: &str, s: &ground_sim::dem::stats::DemStats) {
     println!("{title}");
     let rows: Vec<(&str, String)> = vec![
         ("size", format!("{} x {} px", s.width, s.height)),
@@ -122,22 +122,22 @@ pub struct SensorArgs {
     #[arg(long, default_value_t = 200)]
     pub size_px: usize,
     /// Range noise 1σ, metres.
-    #[arg(long, default_value_t = ground_sim::frames::SensorModel::default().range_noise_m)]
+    #[arg(long, default_value_t = ground_sim::flyer::frames::SensorModel::default().range_noise_m)]
     pub noise_m: f64,
     /// Fraction of dropped pixels.
-    #[arg(long, default_value_t = ground_sim::frames::SensorModel::default().dropout_frac)]
+    #[arg(long, default_value_t = ground_sim::flyer::frames::SensorModel::default().dropout_frac)]
     pub dropout: f64,
 }
 
 impl SensorArgs {
     /// The sensor model these flags describe (square frames, other settings default).
-    pub fn model(&self) -> ground_sim::frames::SensorModel {
-        ground_sim::frames::SensorModel {
+    pub fn model(&self) -> ground_sim::flyer::frames::SensorModel {
+        ground_sim::flyer::frames::SensorModel {
             width_px: self.size_px,
             height_px: self.size_px,
             range_noise_m: self.noise_m,
             dropout_frac: self.dropout,
-            ..ground_sim::frames::SensorModel::default()
+            ..ground_sim::flyer::frames::SensorModel::default()
         }
     }
 }

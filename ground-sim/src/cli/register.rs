@@ -3,8 +3,10 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, bail};
-use ground_sim::matchplot::match_picture;
-use ground_sim::register::{RasterKind, RegisterOptions, read_raster, register, slope_pixels};
+use ground_sim::evaluation::register::{
+    RasterKind, RegisterOptions, read_raster, register, slope_pixels,
+};
+use ground_sim::pictures::matchplot::match_picture;
 use nav_core::frame::slope_to_deg;
 use nav_core::msac::Model;
 

@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, bail};
-use ground_sim::analysis::dem_stats;
+use ground_sim::dem::stats::dem_stats;
 use ground_sim::dem::{Interpolation, read_geotiff, resample_to_pixel, write_geotiff};
 
 /// Arguments of `ground-sim resample`.

@@ -3,9 +3,9 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
-use ground_sim::analysis::{DemStats, dem_stats};
+use ground_sim::dem::stats::{DemStats, dem_stats};
 use ground_sim::dem::{SampleKind, write_geotiff};
-use ground_sim::render::write_pictures;
+use ground_sim::pictures::render::write_pictures;
 use ground_sim::terrain::{Preset, TerrainParams, TerrainReport, Window, generate};
 
 /// Arguments of `ground-sim terrain`.

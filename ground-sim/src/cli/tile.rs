@@ -6,8 +6,8 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use ground_sim::dem::read_geotiff;
+use ground_sim::reference::tile::MAX_TILE_FEATURES;
 use ground_sim::reference::{DEFAULT_SMOOTHING_M, Smoothing, reference_dem, write_reference};
-use ground_sim::tile::MAX_TILE_FEATURES;
 use nav_core::{DetectorConfig, SurfConfig};
 
 /// Arguments of `ground-sim tile`.

@@ -4,9 +4,9 @@ use std::path::PathBuf;
 
 use anyhow::{Context, anyhow};
 use ground_sim::dem::read_geotiff;
-use ground_sim::frames::FramePose;
+use ground_sim::evaluation::trn::check_frame;
+use ground_sim::flyer::frames::FramePose;
 use ground_sim::reference::load;
-use ground_sim::trn::check_frame;
 use nav_core::Tile;
 
 /// Arguments of `ground-sim trn`.
@@ -126,10 +126,10 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
 /// 65535 = no data) and `truth.json` (the true frame → reference pixel affine).
 fn export(
     dir: &std::path::Path,
-    frame: &ground_sim::frames::Frame,
+    frame: &ground_sim::flyer::frames::Frame,
     ref_slope: Option<&ground_sim::dem::Dem>,
     h: &nav_core::TileHeader<'_>,
-    pose: &ground_sim::frames::FramePose,
+    pose: &ground_sim::flyer::frames::FramePose,
 ) -> anyhow::Result<()> {
     use nav_core::frame::slope_from_deg;
     std::fs::create_dir_all(dir)?;
@@ -146,7 +146,7 @@ fn export(
         };
     png16(
         // As the flyer sees it: smoothed by the tile's terrain σ (at the frame's own pixel).
-        &ground_sim::frames::frame_slope_deg(frame, f64::from(h.smoothing_m)),
+        &ground_sim::flyer::frames::frame_slope_deg(frame, f64::from(h.smoothing_m)),
         frame.width,
         frame.height,
         dir.join("frame_slope.png"),
@@ -158,8 +158,9 @@ fn export(
         rs.height(),
         dir.join("reference_slope.png"),
     )?;
-    let t =
-        |x: f64, y: f64| ground_sim::trn::truth_to_tile(h, pose, frame.width, frame.height, x, y);
+    let t = |x: f64, y: f64| {
+        ground_sim::evaluation::trn::truth_to_tile(h, pose, frame.width, frame.height, x, y)
+    };
     let (o, ex, ey) = (t(0.0, 0.0), t(1.0, 0.0), t(0.0, 1.0));
     let truth = serde_json::json!({
         "frame_width": frame.width,

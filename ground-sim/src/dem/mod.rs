@@ -10,6 +10,7 @@
 
 mod geotiff;
 mod resample;
+pub mod stats;
 
 pub use geotiff::{
     SampleKind, read_geotiff, read_geotiff_bytes, write_geotiff, write_geotiff_bytes,

@@ -11,7 +11,7 @@ use serde::Serialize;
 
 use super::geocode::{eq20_fractions, label};
 use super::pipeline::InsarProduct;
-use crate::analysis::slope_deg;
+use crate::dem::stats::slope_deg;
 use crate::dem::{Dem, DemError};
 
 /// Accuracy figures (the core of `report.json`).

@@ -13,13 +13,13 @@ use super::geometry::PairGeometry;
 use super::pipeline::{
     CoregReport, InsarConfig, InsarProduct, MaskFractions, TruthOnGrid, UnwrapReport,
 };
-use crate::analysis::slope_deg;
+use crate::dem::stats::slope_deg;
 use crate::dem::{Dem, SampleKind, write_geotiff};
+use crate::pictures::render::{ColourMap, RasterStyle, raster_image};
+use crate::reference::tile::MAX_TILE_FEATURES;
 use crate::reference::{Smoothing, TileSummary, write_reference};
-use crate::render::{ColourMap, RasterStyle, raster_image};
 use crate::sar::pipeline::{InsarPair, Timings};
 use crate::sar::{Derived, SarConfig};
-use crate::tile::MAX_TILE_FEATURES;
 
 /// Coherence GeoTIFF.
 pub const COHERENCE_FILE: &str = "coherence.tif";
@@ -249,7 +249,7 @@ pub fn write_outputs(
     } else {
         (zlo - 1.0, zlo + 1.0)
     };
-    let slope_range = crate::render::SLOPE_RANGE_DEG;
+    let slope_range = crate::pictures::render::SLOPE_RANGE_DEG;
     for (dem, name, what) in [
         (&p.dem, "fig6a-insar-dem.png", "Fig 6a: InSAR DEM"),
         (truth_grid, "truth-dem.png", "truth DEM at the same grid"),

@@ -75,7 +75,7 @@ fn flat_terrain_gives_zero_height() {
 
 /// Mean slope (degrees) of the valid pixels of `d` at least `margin` pixels from the border.
 fn mean_slope(d: &Dem, margin: usize) -> f64 {
-    let s = crate::analysis::slope_deg(d).unwrap();
+    let s = crate::dem::stats::slope_deg(d).unwrap();
     let (w, h) = (d.width(), d.height());
     let (mut acc, mut n) = (0.0, 0.0);
     for r in margin..h - margin {
@@ -315,7 +315,7 @@ fn diagnose_shift_and_scale() {
 #[ignore = "developer diagnostic"]
 fn diagnose_window_error_picture() {
     use crate::dem::read_geotiff;
-    use crate::render::{ColourMap, RasterStyle, raster_image};
+    use crate::pictures::render::{ColourMap, RasterStyle, raster_image};
     let Ok(d) = std::env::var("UMBRA_DIAG_DIR") else {
         return;
     };
@@ -341,7 +341,7 @@ fn diagnose_window_error_picture() {
         },
     );
     img.save(dir.join("diag-window-error.png")).unwrap();
-    let s = crate::analysis::slope_deg(&win).unwrap();
+    let s = crate::dem::stats::slope_deg(&win).unwrap();
     let img = raster_image(
         &s,
         ins.width(),

@@ -10,8 +10,8 @@
 //! frame `(col, row)` sits at DEM `c + R(heading)·((col, row) − 99.5)`.
 
 use anyhow::{Context, Result, bail};
+use ground_sim::reference::tile::{GeoGrid, MAX_TILE_FEATURES, build_tile};
 use ground_sim::terrain::{Preset, TerrainParams, Window, generate};
-use ground_sim::tile::{GeoGrid, MAX_TILE_FEATURES, build_tile};
 use nav_core::{SLOPE_NODATA, SlopeImage, SurfConfig};
 use serde::{Deserialize, Serialize};
 use std::fs;

@@ -36,7 +36,7 @@ pub fn tile_features(
     let mut integral = vec![0u32; n_int];
     let mut ring = vec![0.0f32; n_ring];
     // The feature set is a few MiB of fixed arrays: build it where the stack has room.
-    crate::onboard::with_big_stack(|| {
+    crate::flyer::onboard::with_big_stack(|| {
         let mut feats = Box::new(Features::<MAX_TILE_FEATURES>::new());
         extract(
             slope,

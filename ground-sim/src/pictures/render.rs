@@ -8,7 +8,7 @@ use std::path::Path;
 
 use image::{Rgb, RgbImage};
 
-use crate::analysis::slope_deg;
+use crate::dem::stats::slope_deg;
 use crate::dem::{Dem, DemError};
 
 /// Glyph scale: 8×8 font glyphs drawn as 16×16 pixels.

@@ -4,8 +4,8 @@
 use nav_core::{Fix, Tile, TileHeader};
 use serde::Serialize;
 
-use crate::frames::FramePose;
-use crate::onboard::FrameRun;
+use crate::flyer::frames::FramePose;
+use crate::flyer::onboard::FrameRun;
 
 /// Truth map from frame pixels to tile pixels for a frame taken at `pose`.
 pub fn truth_to_tile(
@@ -160,7 +160,7 @@ fn fill_fix(
 /// One synthetic frame flown through the onboard chain and scored (what `trn` and `demo` do).
 pub struct FrameCheck {
     /// The synthesised frame.
-    pub frame: crate::frames::Frame,
+    pub frame: crate::flyer::frames::Frame,
     /// The onboard result.
     pub run: FrameRun,
     /// Its scores against the truth.
@@ -175,11 +175,11 @@ pub fn check_frame(
     dem: &crate::dem::Dem,
     tile: &Tile<'_>,
     pose: &FramePose,
-    sensor: &crate::frames::SensorModel,
+    sensor: &crate::flyer::frames::SensorModel,
     seed: u64,
 ) -> anyhow::Result<FrameCheck> {
-    use crate::onboard::{FrameInput, new_workspace, run_frame, with_big_stack};
-    let frame = crate::frames::synth_frame(dem, pose, sensor, seed)?;
+    use crate::flyer::onboard::{FrameInput, new_workspace, run_frame, with_big_stack};
+    let frame = crate::flyer::frames::synth_frame(dem, pose, sensor, seed)?;
     let nav = nav_core::Navigator::new(*tile, nav_core::NavConfig::default());
     let run = with_big_stack(|| {
         let mut ws = new_workspace();
@@ -199,8 +199,8 @@ impl FrameCheck {
     /// The paper's Fig. 7 picture: this frame's slope (left) and the reference slope map
     /// (degrees, right) with the match lines.
     pub fn picture(&self, ref_slope: &crate::dem::Dem) -> image::RgbImage {
-        let fs = crate::frames::frame_slope_deg(&self.frame, f64::from(self.smoothing_m));
-        crate::matchplot::match_picture(
+        let fs = crate::flyer::frames::frame_slope_deg(&self.frame, f64::from(self.smoothing_m));
+        crate::pictures::matchplot::match_picture(
             (&fs, self.frame.width, self.frame.height),
             (ref_slope.heights_m(), ref_slope.width(), ref_slope.height()),
             &self.run.pairs,

@@ -18,9 +18,9 @@ use nav_core::{NavConfig, Navigator, SlopeImage, SurfConfig, Tile};
 use serde::Serialize;
 
 use crate::dem::read_geotiff;
-use crate::tile::{GeoGrid, MAX_TILE_FEATURES, build_tile};
+use crate::reference::tile::{GeoGrid, MAX_TILE_FEATURES, build_tile};
 
-use crate::onboard::{FrameInput, MAX_FRAME_SIDE, new_workspace, run_frame, with_big_stack};
+use crate::flyer::onboard::{FrameInput, MAX_FRAME_SIDE, new_workspace, run_frame, with_big_stack};
 
 /// What the raster values are.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

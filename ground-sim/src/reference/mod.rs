@@ -14,7 +14,9 @@ use serde::Serialize;
 use crate::dem::{
     Dem, GeoRef, GeoTransform, Interpolation, read_geotiff, resample_to_pixel, write_geotiff,
 };
-use crate::tile::{GeoGrid, build_tile};
+use crate::reference::tile::{GeoGrid, build_tile};
+
+pub mod tile;
 
 /// Tile blob file name.
 pub const TILE_FILE: &str = "tile.bin";
@@ -213,7 +215,7 @@ pub fn reference_slope_px(dem: &Dem, sigma_m: f64) -> Result<Vec<nav_core::Slope
     }
     let heights = dem.heights_m().to_vec();
     let (w, h) = (dem.width(), dem.height());
-    crate::onboard::with_big_stack(move || {
+    crate::flyer::onboard::with_big_stack(move || {
         let patch = DemPatch::new_checked(&heights, w, h, pixel_m as f32)
             .map_err(|e| anyhow::anyhow!("reference DEM: {e}"))?;
         let mut px = vec![nav_core::SLOPE_NODATA; w * h];

@@ -4,7 +4,7 @@
 use image::{Rgb, RgbImage};
 use imageproc::drawing::{draw_filled_circle_mut, draw_line_segment_mut};
 
-use crate::render::{GLYPH, draw_text, fmt_tick, ticks};
+use crate::pictures::render::{GLYPH, draw_text, fmt_tick, ticks};
 
 /// How a series is drawn.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

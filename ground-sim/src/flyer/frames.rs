@@ -189,9 +189,9 @@ pub fn frame_slope_deg(frame: &Frame, smoothing_m: f64) -> Vec<f32> {
         frame.pose.pixel_m as f32,
     ) {
         let sigma_px = (smoothing_m / frame.pose.pixel_m) as f32;
-        let _ = nav_core::slope::slope_into_binned_smoothed::<{ crate::onboard::MAX_FRAME_SIDE }>(
-            &patch, 1, sigma_px, &mut px, false,
-        );
+        let _ = nav_core::slope::slope_into_binned_smoothed::<
+            { crate::flyer::onboard::MAX_FRAME_SIDE },
+        >(&patch, 1, sigma_px, &mut px, false);
     }
     px.iter()
         .map(|&p| slope_to_deg(p).unwrap_or(f32::NAN))

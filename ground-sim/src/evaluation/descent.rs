@@ -13,8 +13,8 @@ use rand::{RngExt, SeedableRng};
 use serde::Serialize;
 
 use crate::dem::Dem;
-use crate::frames::{FramePose, SensorModel, height_at_geo, synth_frame};
-use crate::onboard::{FrameInput, Workspace, run_frame};
+use crate::flyer::frames::{FramePose, SensorModel, height_at_geo, synth_frame};
+use crate::flyer::onboard::{FrameInput, Workspace, run_frame};
 
 /// Scenario and vehicle settings.
 #[derive(Debug, Clone, Copy, Serialize)]
