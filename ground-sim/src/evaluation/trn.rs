@@ -64,8 +64,12 @@ pub struct TrnScore {
     pub center_err_px: Option<f64>,
     /// Error of the frame centre, metres.
     pub pos_err_m: Option<f64>,
-    /// Reported 1σ of the centre, metres.
+    /// Reported 1σ of the centre, metres (the larger principal axis of its covariance).
     pub center_sigma_m: Option<f64>,
+    /// Normalised estimation error squared of the centre: `eᵀ C⁻¹ e` with `e` the geo error
+    /// (metres, east/north) and `C` the fix's reported covariance; 2 on average (2 dof) when
+    /// the covariance is consistent, ≤ 9 (the 3σ ellipse) for 98.9 % of consistent fixes.
+    pub nees: Option<f64>,
     /// Onboard time on this host, ms.
     pub time_ms: f64,
     /// Truth pose.
@@ -139,7 +143,16 @@ fn fill_fix(
     let ce = (f.center_tile_px[0] - tx).hypot(f.center_tile_px[1] - ty);
     s.center_err_px = Some(ce);
     s.pos_err_m = Some(ce * h.pixel_m());
-    s.center_sigma_m = Some(f.center_cov_geo_m2[0][0].max(0.0).sqrt());
+    let c = f.center_cov_geo_m2;
+    let (tr, det) = (c[0][0] + c[1][1], c[0][0] * c[1][1] - c[0][1] * c[1][0]);
+    let big = 0.5 * tr + (0.25 * tr * tr - det).max(0.0).sqrt();
+    s.center_sigma_m = Some(big.max(0.0).sqrt());
+    let (gx, gy) = h.pixel_to_geo(f.center_tile_px[0], f.center_tile_px[1]);
+    let (tgx, tgy) = pose.frame_to_geo((w as f64 - 1.0) / 2.0, (hh as f64 - 1.0) / 2.0, w, hh);
+    let (ex, ey) = (gx - tgx, gy - tgy);
+    // eᵀ C⁻¹ e with the 2 × 2 inverse written out; a singular covariance gives no figure.
+    s.nees = (det > 0.0)
+        .then(|| (c[1][1] * ex * ex - (c[0][1] + c[1][0]) * ex * ey + c[0][0] * ey * ey) / det);
     let errs: Vec<f64> = run
         .pairs
         .iter()

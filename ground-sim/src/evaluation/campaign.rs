@@ -1,0 +1,406 @@
+//! Monte-Carlo TRN campaigns: frames at random positions, headings and scales inside a tile,
+//! flown through the flight code and scored against the truth; parallel on all cores, every
+//! trial seeded on its own so the result does not depend on the thread count. `eval` runs one,
+//! `suite` runs one per scene, tile kind and prior mode.
+
+use std::collections::BTreeMap;
+use std::io::Write;
+use std::path::Path;
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use anyhow::{Context, anyhow, bail};
+use indicatif::ProgressBar;
+use nav_core::{NavConfig, Navigator, Prior, Tile};
+use rand::{RngExt, SeedableRng};
+use rayon::prelude::*;
+use serde::Serialize;
+
+use crate::dem::Dem;
+use crate::evaluation::trn::{TrnScore, score};
+use crate::flyer::frames::{FramePose, SensorModel, centre_extent, frame_reach_m, synth_frame};
+use crate::flyer::onboard::{FrameInput, WORKSPACE_STACK, new_workspace, run_frame};
+
+/// The prior a campaign hands the navigator with every frame: what the nav filter would know in
+/// flight, drawn around the truth with these 1σ (Gaussian, per frame, seeded with the trial).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct PriorSpec {
+    /// 1σ position error of the prior per axis, metres.
+    pub sigma_m: f64,
+    /// 1σ heading error of the prior, degrees.
+    pub heading_sigma_deg: f64,
+    /// 1σ relative scale error (the altimeter's), e.g. 0.02.
+    pub scale_sigma: f64,
+}
+
+/// What a campaign flies.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct CampaignSpec {
+    /// Number of frames.
+    pub trials: usize,
+    /// Campaign seed (positions, headings, scales, noise, prior draws).
+    pub seed: u64,
+    /// Smallest frame pixel size, metres.
+    pub pixel_min_m: f64,
+    /// Largest frame pixel size, metres.
+    pub pixel_max_m: f64,
+    /// The flyer's ranging sensor.
+    pub sensor: SensorModel,
+    /// The prior given with each frame; `None`: lost in space.
+    pub prior: Option<PriorSpec>,
+}
+
+/// Draw a standard normal variate (Box–Muller; one per call keeps the stream simple).
+fn normal(rng: &mut impl RngExt) -> f64 {
+    let u1: f64 = rng.random::<f64>().max(f64::MIN_POSITIVE);
+    let u2: f64 = rng.random();
+    (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+}
+
+/// The rotation a perfect fix reports for a frame at `heading_rad` (clockwise from east): the
+/// heading itself in a north-up tile (pixel y pointing south), its negative otherwise.
+pub fn expected_rotation_rad(tile: &Tile<'_>, heading_rad: f64) -> f64 {
+    if tile.header().pixel_y_m < 0.0 {
+        heading_rad
+    } else {
+        -heading_rad
+    }
+}
+
+/// A prior around the truth `pose` with `spec`'s errors, in the tile's pixel axes.
+pub fn prior_around(
+    tile: &Tile<'_>,
+    pose: &FramePose,
+    spec: &PriorSpec,
+    rng: &mut impl RngExt,
+) -> Prior {
+    let h = tile.header();
+    let (ex, ey) = (spec.sigma_m * normal(rng), spec.sigma_m * normal(rng));
+    let dh = spec.heading_sigma_deg.to_radians() * normal(rng);
+    let ds = spec.scale_sigma * normal(rng);
+    let scale = pose.pixel_m / h.pixel_m();
+    Prior {
+        center_tile_px: [
+            ((pose.x_m + ex - h.origin_x_m) / h.pixel_x_m) as f32,
+            ((pose.y_m + ey - h.origin_y_m) / h.pixel_y_m) as f32,
+        ],
+        sigma_px: (spec.sigma_m / h.pixel_m()) as f32,
+        heading_rad: expected_rotation_rad(tile, pose.heading_rad + dh) as f32,
+        heading_sigma_rad: spec.heading_sigma_deg.to_radians() as f32,
+        scale: (scale * (1.0 + ds)) as f32,
+        scale_sigma: spec.scale_sigma.max(1e-3) as f32,
+    }
+}
+
+/// Frame centres a campaign may draw: inside both the tile and the DEM, a frame's reach from
+/// every edge. `(x0, x1, y0, y1)` in geo metres.
+pub fn centre_box(
+    tile: &Tile<'_>,
+    dem: &Dem,
+    spec: &CampaignSpec,
+) -> anyhow::Result<(f64, f64, f64, f64)> {
+    let h = tile.header();
+    let (tx0, ty0) = h.pixel_to_geo(0.0, 0.0);
+    let (tx1, ty1) = h.pixel_to_geo(h.width_px as f64 - 1.0, h.height_px as f64 - 1.0);
+    let (dx0, dx1, dy0, dy1) = centre_extent(dem);
+    let reach = frame_reach_m(&spec.sensor, spec.pixel_max_m);
+    let (x0, x1) = (tx0.min(tx1).max(dx0) + reach, tx0.max(tx1).min(dx1) - reach);
+    let (y0, y1) = (ty0.min(ty1).max(dy0) + reach, ty0.max(ty1).min(dy1) - reach);
+    if !(x1 > x0 && y1 > y0) {
+        bail!(
+            "the tile and DEM overlap leaves no room for a {}-px frame at {} m",
+            spec.sensor.width_px.max(spec.sensor.height_px),
+            spec.pixel_max_m
+        );
+    }
+    Ok((x0, x1, y0, y1))
+}
+
+/// Fly the campaign: one scored row per trial, in trial order.
+pub fn run_campaign(
+    tile: Tile<'_>,
+    config: NavConfig,
+    dem: &Dem,
+    spec: &CampaignSpec,
+    progress: &ProgressBar,
+) -> anyhow::Result<Vec<TrnScore>> {
+    if spec.trials == 0 {
+        bail!("a campaign needs at least one trial");
+    }
+    if !(spec.pixel_min_m > 0.0 && spec.pixel_max_m >= spec.pixel_min_m) {
+        bail!("need 0 < smallest frame pixel ≤ largest frame pixel");
+    }
+    let (x0, x1, y0, y1) = centre_box(&tile, dem, spec)?;
+    let nav = Navigator::new(tile, config);
+    let done = AtomicUsize::new(0);
+    let pool = rayon::ThreadPoolBuilder::new()
+        .stack_size(WORKSPACE_STACK)
+        .build()?;
+    let rows: Vec<anyhow::Result<TrnScore>> = pool.install(|| {
+        (0..spec.trials)
+            .into_par_iter()
+            .map_init(new_workspace, |ws, i| {
+                // Each trial has its own seed: results do not depend on the thread count.
+                let mut rng = rand_pcg::Pcg64::seed_from_u64(
+                    spec.seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ i as u64,
+                );
+                let pose = FramePose {
+                    x_m: x0 + (x1 - x0) * rng.random::<f64>(),
+                    y_m: y0 + (y1 - y0) * rng.random::<f64>(),
+                    heading_rad: std::f64::consts::TAU * rng.random::<f64>(),
+                    pixel_m: spec.pixel_min_m
+                        + (spec.pixel_max_m - spec.pixel_min_m) * rng.random::<f64>(),
+                };
+                let frame = synth_frame(dem, &pose, &spec.sensor, rng.random::<u64>())?;
+                // The prior draws come after the frame's, so a campaign without a prior flies
+                // the very frames of the same campaign with one.
+                let prior = spec
+                    .prior
+                    .map(|p| prior_around(nav.tile(), &pose, &p, &mut rng));
+                let run = run_frame(
+                    &nav,
+                    ws,
+                    FrameInput::Dem(&frame.heights_m, frame.width, frame.height, pose.pixel_m),
+                    prior.as_ref(),
+                )
+                .map_err(|e| anyhow!("trial {i}: {e}"))?;
+                progress.set_position(done.fetch_add(1, Ordering::Relaxed) as u64 + 1);
+                Ok(score(nav.tile(), &run, &pose, frame.width, frame.height))
+            })
+            .collect()
+    });
+    rows.into_iter().collect()
+}
+
+/// Campaign summary (the JSON of `ground-sim eval`, one row of `suite`).
+#[derive(Debug, Clone, Serialize)]
+pub struct EvalSummary {
+    /// Frames flown.
+    pub trials: usize,
+    /// Campaign seed.
+    pub seed: u64,
+    /// The prior given with each frame (`null`: none).
+    pub prior: Option<PriorSpec>,
+    /// Fraction of frames with a correct fix (≤ 3 reference px).
+    pub success_rate: f64,
+    /// Fraction of frames with a fix more than 3 reference px off.
+    pub false_fix_rate: f64,
+    /// Number of such false fixes.
+    pub false_fixes: usize,
+    /// Fraction of frames without a fix.
+    pub no_fix_rate: f64,
+    /// Median position error of correct fixes, metres.
+    pub pos_err_p50_m: f64,
+    /// 95th percentile position error of correct fixes, metres.
+    pub pos_err_p95_m: f64,
+    /// Largest position error of any fix, metres.
+    pub pos_err_max_m: f64,
+    /// 95th percentile |heading error| of fixes, degrees.
+    pub heading_err_p95_deg: f64,
+    /// Largest |heading error| of fixes, degrees.
+    pub heading_err_max_deg: f64,
+    /// 95th percentile |scale error| of fixes, relative.
+    pub scale_err_p95: f64,
+    /// Mean of the per-frame mean registration error, reference pixels.
+    pub reg_err_mean_px: f64,
+    /// Fraction of fixes whose centre error lies inside their 3σ ellipse (NEES ≤ 9; a
+    /// consistent covariance puts 98.9 % there).
+    pub within_3sigma_frac: f64,
+    /// Mean NEES of the fixes' centres (2 dof: 2 when consistent, less when padded, more when
+    /// optimistic).
+    pub nees_mean: f64,
+    /// Mean onboard time per frame on this host, ms.
+    pub time_ms_mean: f64,
+    /// No-fix reasons and their counts.
+    pub no_fix_reasons: BTreeMap<String, usize>,
+    /// Fraction of fixes refined densely against the tile's slope raster.
+    pub refined_frac: f64,
+    /// Mean of (centre error / refinement's own σ per axis)² over refined correct fixes: 2 if
+    /// the refinement's statistical covariance were consistent (the fixes report the feature
+    /// covariance; see docs/registration.md).
+    pub refined_nees_mean: f64,
+    /// Why fixes were not refined, and how often.
+    pub refine_notes: BTreeMap<String, usize>,
+    /// Frame pixel size range, metres.
+    pub pixel_range_m: [f64; 2],
+    /// Sensor model.
+    pub sensor: SensorModel,
+}
+
+/// Nearest-rank percentile `p` ∈ [0, 1] of `v` (sorted in place); NaN when empty.
+pub fn percentile(v: &mut [f64], p: f64) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(f64::total_cmp);
+    let k = ((v.len() - 1) as f64 * p).round() as usize;
+    v[k.min(v.len() - 1)]
+}
+
+/// Summarise a campaign's rows.
+pub fn summarize(rows: &[TrnScore], spec: &CampaignSpec) -> EvalSummary {
+    let n = rows.len().max(1) as f64;
+    let fixes: Vec<&TrnScore> = rows.iter().filter(|r| r.fix).collect();
+    let good: Vec<&TrnScore> = fixes.iter().copied().filter(|r| !r.false_fix).collect();
+    let mut pos: Vec<f64> = good.iter().filter_map(|r| r.pos_err_m).collect();
+    let head: Vec<f64> = fixes
+        .iter()
+        .filter_map(|r| r.heading_err_deg.map(f64::abs))
+        .collect();
+    let mut scl: Vec<f64> = fixes
+        .iter()
+        .filter_map(|r| r.scale.map(|s| (s / r.scale_truth - 1.0).abs()))
+        .collect();
+    let reg: Vec<f64> = fixes.iter().filter_map(|r| r.pos_err_mean_px).collect();
+    let nees: Vec<f64> = fixes.iter().filter_map(|r| r.nees).collect();
+    let mut reasons = BTreeMap::new();
+    for r in rows.iter().filter(|r| !r.fix) {
+        *reasons
+            .entry(r.no_fix_reason.clone().unwrap_or_default())
+            .or_insert(0) += 1;
+    }
+    let mut refine_notes = BTreeMap::new();
+    for r in &fixes {
+        if let Some(note) = &r.refine_note {
+            *refine_notes.entry(note.clone()).or_insert(0) += 1;
+        }
+    }
+    let refined_nees: Vec<f64> = good
+        .iter()
+        .filter_map(|r| Some((r.pos_err_m? / r.refined_sigma_m?).powi(2)))
+        .collect();
+    let mean = |v: &[f64]| {
+        if v.is_empty() {
+            f64::NAN
+        } else {
+            v.iter().sum::<f64>() / v.len() as f64
+        }
+    };
+    EvalSummary {
+        trials: rows.len(),
+        seed: spec.seed,
+        prior: spec.prior,
+        success_rate: good.len() as f64 / n,
+        false_fix_rate: (fixes.len() - good.len()) as f64 / n,
+        false_fixes: fixes.len() - good.len(),
+        no_fix_rate: (rows.len() - fixes.len()) as f64 / n,
+        pos_err_p50_m: percentile(&mut pos.clone(), 0.5),
+        pos_err_p95_m: percentile(&mut pos, 0.95),
+        pos_err_max_m: fixes.iter().filter_map(|r| r.pos_err_m).fold(0.0, f64::max),
+        heading_err_p95_deg: percentile(&mut head.clone(), 0.95),
+        heading_err_max_deg: head.iter().copied().fold(0.0, f64::max),
+        scale_err_p95: percentile(&mut scl, 0.95),
+        reg_err_mean_px: mean(&reg),
+        within_3sigma_frac: nees.iter().filter(|&&d| d <= 9.0).count() as f64
+            / fixes.len().max(1) as f64,
+        nees_mean: mean(&nees),
+        time_ms_mean: rows.iter().map(|r| r.time_ms).sum::<f64>() / n,
+        no_fix_reasons: reasons,
+        refined_frac: fixes.iter().filter(|r| r.refined).count() as f64 / fixes.len().max(1) as f64,
+        refine_notes,
+        refined_nees_mean: mean(&refined_nees),
+        pixel_range_m: [spec.pixel_min_m, spec.pixel_max_m],
+        sensor: spec.sensor,
+    }
+}
+
+/// Print the summary's headline figures.
+pub fn print_summary(s: &EvalSummary) {
+    println!(
+        "trials      {} (seed {}){}",
+        s.trials,
+        s.seed,
+        s.prior.map_or(String::from(", no prior"), |p| format!(
+            ", prior σ {} m, heading σ {}°",
+            p.sigma_m, p.heading_sigma_deg
+        ))
+    );
+    println!(
+        "success     {:.2} %  false fix {:.2} %  no fix {:.2} %",
+        s.success_rate * 100.0,
+        s.false_fix_rate * 100.0,
+        s.no_fix_rate * 100.0
+    );
+    println!(
+        "position    p50 {:.2} m  p95 {:.2} m  max {:.2} m",
+        s.pos_err_p50_m, s.pos_err_p95_m, s.pos_err_max_m
+    );
+    println!(
+        "heading     p95 {:.3}°  max {:.3}°;  scale error p95 {:.3} %",
+        s.heading_err_p95_deg,
+        s.heading_err_max_deg,
+        s.scale_err_p95 * 100.0
+    );
+    println!(
+        "consistency {:.1} % of fixes inside their 3σ ellipse, mean NEES {:.2} (2 = consistent); mean onboard time {:.2} ms",
+        s.within_3sigma_frac * 100.0,
+        s.nees_mean,
+        s.time_ms_mean
+    );
+    if !s.no_fix_reasons.is_empty() {
+        println!("no fix      {:?}", s.no_fix_reasons);
+    }
+    println!(
+        "refined     {:.1} % of fixes (their own covariance: mean NEES {:.2}, 2 = consistent){}",
+        s.refined_frac * 100.0,
+        s.refined_nees_mean,
+        if s.refine_notes.is_empty() {
+            String::new()
+        } else {
+            format!(" (not refined: {:?})", s.refine_notes)
+        }
+    );
+}
+
+/// Write one CSV row per trial.
+pub fn write_csv(path: &Path, rows: &[TrnScore]) -> anyhow::Result<()> {
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
+    let mut csv = std::io::BufWriter::new(
+        std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?,
+    );
+    writeln!(
+        csv,
+        "trial,x_m,y_m,heading_deg,pixel_m,fix,false_fix,features,matches,inliers,rotation_deg,heading_err_deg,scale,scale_truth,pos_err_m,center_err_px,reg_err_mean_px,reg_err_max_px,center_sigma_m,nees,time_ms,refined,ncc,refined_sigma_m,refine_note,no_fix_reason"
+    )?;
+    let o = |v: Option<f64>| v.map_or(String::new(), |x| format!("{x:.6}"));
+    for (i, r) in rows.iter().enumerate() {
+        let t = r.truth.unwrap_or(FramePose {
+            x_m: f64::NAN,
+            y_m: f64::NAN,
+            heading_rad: f64::NAN,
+            pixel_m: f64::NAN,
+        });
+        writeln!(
+            csv,
+            "{i},{:.3},{:.3},{:.4},{:.4},{},{},{},{},{},{},{},{},{:.6},{},{},{},{},{},{},{:.3},{},{},{},{},{}",
+            t.x_m,
+            t.y_m,
+            t.heading_rad.to_degrees(),
+            t.pixel_m,
+            r.fix,
+            r.false_fix,
+            r.features,
+            r.matches,
+            r.inliers,
+            o(r.rotation_deg),
+            o(r.heading_err_deg),
+            o(r.scale),
+            r.scale_truth,
+            o(r.pos_err_m),
+            o(r.center_err_px),
+            o(r.pos_err_mean_px),
+            o(r.pos_err_max_px),
+            o(r.center_sigma_m),
+            o(r.nees),
+            r.time_ms,
+            r.refined,
+            o(r.ncc.map(f64::from)),
+            o(r.refined_sigma_m),
+            r.refine_note.as_deref().unwrap_or(""),
+            r.no_fix_reason.as_deref().unwrap_or("")
+        )?;
+    }
+    csv.flush()?;
+    Ok(())
+}
