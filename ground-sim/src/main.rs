@@ -36,6 +36,11 @@ enum Commands {
     Eval(cli::eval::Args),
     /// Campaign of closed-loop hops: dynamics, IMU, TRN fixes, nav filter, guidance.
     Descent(cli::descent::Args),
+    /// The terrain suite: every scene × {truth-built, InSAR tile} × {no prior, prior} as eval
+    /// campaigns, with the navigability map scored; one table, one picture, JSON.
+    Suite(cli::suite::Args),
+    /// Navigability map of a reference folder: where a frame is predicted to get a fix.
+    Navmap(cli::navmap::Args),
     /// Regenerate docs/results.md from fresh runs (paper cases, campaigns, descents).
     Results(cli::results::Args),
     /// Simulate dual-antenna SAR echoes over a DEM and focus them into SLCs.
@@ -73,6 +78,8 @@ fn dispatch(cli: Cli) -> anyhow::Result<()> {
         Commands::Trn(a) => cli::trn::run(a),
         Commands::Eval(a) => cli::eval::run(a),
         Commands::Descent(a) => cli::descent::run(a),
+        Commands::Suite(a) => cli::suite::run(a),
+        Commands::Navmap(a) => cli::navmap::run(a),
         Commands::Sar(a) => run_sar(a.clone()),
         Commands::Insar(a) => cli::insar::run(a),
         Commands::Psf(a) => run_psf(a.clone()),

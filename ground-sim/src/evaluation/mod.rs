@@ -3,5 +3,7 @@
 
 pub mod campaign;
 pub mod descent;
+pub mod navmap;
+pub mod suite;
 pub mod register;
 pub mod trn;

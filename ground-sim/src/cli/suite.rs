@@ -1,0 +1,162 @@
+//! `ground-sim suite`: every scene of the terrain suite × {truth-built, InSAR tile} × {no prior,
+//! prior} as `eval` campaigns, one table, one picture, JSON; the navigability map of every tile
+//! scored against the same frames.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::bail;
+use ground_sim::evaluation::campaign::PriorSpec;
+use ground_sim::evaluation::navmap::NavmapThresholds;
+use ground_sim::evaluation::suite::{
+    SHARED_DATA_DIR, SuiteReport, SuiteSpec, TileKind, default_scenes, run_scene, suite_picture,
+    table_markdown,
+};
+use ground_sim::sar::cli::RadarArgs;
+
+/// Arguments of `ground-sim suite`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct Args {
+    /// Output folder: one sub-folder per scene (DEM, tiles, campaign CSV/JSON, navmaps) and
+    /// `suite.json`, `suite.md`, `suite.png`.
+    #[arg(long, default_value = "out/suite")]
+    pub out: PathBuf,
+    /// Frames per campaign.
+    #[arg(long, default_value_t = 300)]
+    pub trials: usize,
+    /// Campaign seed (frame poses, noise, prior draws).
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Terrain seed of the synthetic scenes.
+    #[arg(long, default_value_t = 1)]
+    pub terrain_seed: u64,
+    /// Side of every scene, metres.
+    #[arg(long, default_value_t = 4000.0)]
+    pub size_m: f64,
+    /// CI size: 3 km scenes, 120-px frames, 40 frames per campaign (overrides those flags).
+    #[arg(long)]
+    pub quick: bool,
+    /// Only these scenes (names as in the table; default all).
+    #[arg(long, value_delimiter = ',')]
+    pub scenes: Vec<String>,
+    /// Tile kinds to fly.
+    #[arg(long, value_enum, value_delimiter = ',', default_values_t = [TileKind::Truth, TileKind::Insar])]
+    pub kinds: Vec<TileKind>,
+    /// Position σ of the prior mode, metres (0: fly without a prior only).
+    #[arg(long, default_value_t = 50.0)]
+    pub prior_sigma_m: f64,
+    /// Heading σ of the prior mode, degrees.
+    #[arg(long, default_value_t = 2.0)]
+    pub prior_heading_sigma_deg: f64,
+    /// Frame side, pixels.
+    #[arg(long, default_value_t = 200)]
+    pub size_px: usize,
+    /// Folder of real DEMs that join the suite when present.
+    #[arg(long, default_value = SHARED_DATA_DIR)]
+    pub shared: PathBuf,
+    /// Radar of the InSAR tiles (as `insar`: noise off unless `--nesz-db`).
+    #[command(flatten)]
+    pub radar: RadarArgs,
+}
+
+/// Run `ground-sim suite`.
+pub fn run(a: &Args) -> anyhow::Result<()> {
+    let t0 = Instant::now();
+    let (trials, size_m, size_px) = if a.quick {
+        (40, 3000.0, 120)
+    } else {
+        (a.trials, a.size_m, a.size_px)
+    };
+    if trials == 0 {
+        bail!("--trials must be ≥ 1");
+    }
+    let shared = a.shared.is_dir().then_some(a.shared.as_path());
+    if shared.is_none() {
+        println!(
+            "note: {} is absent: the real-DEM scenes are left out",
+            a.shared.display()
+        );
+    }
+    let mut scenes = default_scenes(a.terrain_seed, size_m, shared);
+    if !a.scenes.is_empty() {
+        for n in &a.scenes {
+            if !scenes.iter().any(|s| &s.name == n) {
+                let all: Vec<&str> = scenes.iter().map(|s| s.name.as_str()).collect();
+                bail!("no scene named {n:?}; the suite has {}", all.join(", "));
+            }
+        }
+        scenes.retain(|s| a.scenes.contains(&s.name));
+    }
+    let mut priors = vec![None];
+    if a.prior_sigma_m > 0.0 {
+        priors.push(Some(PriorSpec {
+            sigma_m: a.prior_sigma_m,
+            heading_sigma_deg: a.prior_heading_sigma_deg,
+            scale_sigma: 0.02,
+        }));
+    }
+    let sensor = ground_sim::flyer::frames::SensorModel {
+        width_px: size_px,
+        height_px: size_px,
+        ..Default::default()
+    };
+    let spec = SuiteSpec {
+        trials,
+        seed: a.seed,
+        pixel_range_m: [9.0, 11.0],
+        sensor,
+        kinds: a.kinds.clone(),
+        priors,
+        reference_pixel_m: 20.0,
+        radar: super::insar::radar_config(&a.radar)?,
+        navmap: NavmapThresholds::default(),
+    };
+    let n_campaigns = scenes.len() * spec.kinds.len() * spec.priors.len();
+    let pb = super::progress(n_campaigns as u64, "suite");
+    let mut report = SuiteReport {
+        spec,
+        scenes: Vec::new(),
+        rows: Vec::new(),
+        seconds: 0.0,
+    };
+    for scene in &scenes {
+        let (sr, rows) = run_scene(scene, &report.spec, &a.out.join(&scene.name), &pb)?;
+        // Printed whether or not the bar shows (a hidden bar's println prints nothing).
+        let line = format!(
+            "{:<18} {:>5.1} s  {}",
+            scene.name,
+            sr.seconds,
+            rows.iter()
+                .map(|r| format!(
+                    "{}{}: {:.1} %",
+                    r.kind.name(),
+                    if r.summary.prior.is_some() { "+prior" } else { "" },
+                    100.0 * r.summary.success_rate
+                ))
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+        pb.suspend(|| println!("{line}"));
+        report.scenes.push(sr);
+        report.rows.extend(rows);
+    }
+    pb.finish_and_clear();
+    report.seconds = t0.elapsed().as_secs_f64();
+    let table = table_markdown(&report);
+    println!("\n{table}");
+    println!("suite: {} campaigns in {:.0} s", report.rows.len(), report.seconds);
+    write_outputs(&report, &table, &a.out)
+}
+
+fn write_outputs(report: &SuiteReport, table: &str, out: &Path) -> anyhow::Result<()> {
+    super::write_json(&out.join("suite.json"), report)?;
+    std::fs::write(out.join("suite.md"), table)?;
+    suite_picture(report).save(out.join("suite.png"))?;
+    println!(
+        "json {}\ntable {}\npicture {}",
+        out.join("suite.json").display(),
+        out.join("suite.md").display(),
+        out.join("suite.png").display()
+    );
+    Ok(())
+}
