@@ -60,6 +60,7 @@ extern crate std;
 pub mod describe;
 pub mod detector;
 pub mod filter;
+pub mod flight;
 pub mod frame;
 pub mod integral;
 pub mod matching;

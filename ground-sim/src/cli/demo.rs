@@ -18,6 +18,7 @@ use anyhow::{Context, anyhow};
 use ground_sim::dem::SampleKind;
 use ground_sim::evaluation::trn::{TrnScore, check_frame};
 use ground_sim::flyer::frames::{FramePose, SensorModel};
+use ground_sim::flyer::onboard::Budget;
 use ground_sim::insar::InsarConfig;
 use ground_sim::insar::pipeline::process_simulated;
 use ground_sim::insar::products::{InsarReport, RunContext, SarSummary, write_outputs};
@@ -249,7 +250,7 @@ fn trn_check(
         pixel_m: 10.0,
     };
     let sensor = SensorModel::default();
-    let check = check_frame(truth, &tile, &pose, &sensor, 1)?;
+    let check = check_frame(truth, &tile, &pose, &sensor, 1, Budget::Flight)?;
     let s = check.score.clone();
     super::write_json(&out.join("trn.json"), &s)?;
     if let Some(ref_slope) = &reference.slope {

@@ -8,7 +8,7 @@ use anyhow::{Context, anyhow, bail};
 use ground_sim::dem::read_geotiff;
 use ground_sim::evaluation::descent::{DescentConfig, RunResult, fly};
 use ground_sim::flyer::frames::{centre_extent, frame_reach_m};
-use ground_sim::flyer::onboard::{WORKSPACE_STACK, new_workspace};
+use ground_sim::flyer::onboard::{Budget, WORKSPACE_STACK, new_workspace};
 use ground_sim::pictures::plot::{Plot, Series, Style};
 use ground_sim::reference::load;
 use nav_core::{NavConfig, Navigator, Tile};
@@ -19,6 +19,10 @@ use serde::Serialize;
 /// Arguments of `ground-sim descent`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
+    /// Navigator budget: `flight` (the firmware's, what flies) or `host` (bigger than what
+    /// flies; labelled in every output).
+    #[arg(long, value_enum, default_value_t = Budget::Flight)]
+    pub budget: Budget,
     /// Reference folder (tile.bin).
     #[arg(long)]
     pub tile: PathBuf,
@@ -61,6 +65,8 @@ pub struct DescentSummary {
     pub runs: usize,
     /// Campaign seed.
     pub seed: u64,
+    /// The navigator budget the frames were flown with (`flight` is what flies).
+    pub budget: String,
     /// Median landing error, m.
     pub landing_err_p50_m: f64,
     /// 95th percentile landing error, m.
@@ -143,31 +149,34 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
     let results: Vec<anyhow::Result<RunResult>> = pool.install(|| {
         (0..a.runs)
             .into_par_iter()
-            .map_init(new_workspace, |ws, i| {
-                let mut rng = rand_pcg::Pcg64::seed_from_u64(
-                    a.seed.wrapping_mul(0x2545_F491_4F6C_DD1D) ^ (i as u64 + 1),
-                );
-                // Draw a release point and a target at a hop length in range, both inside.
-                let mut pick = None;
-                for _ in 0..1000 {
-                    let r = [
-                        x0 + (x1 - x0) * rng.random::<f64>(),
-                        y0 + (y1 - y0) * rng.random::<f64>(),
-                    ];
-                    let d =
-                        cfg.hop_min_m + (hop_max - cfg.hop_min_m).max(0.0) * rng.random::<f64>();
-                    let b = std::f64::consts::TAU * rng.random::<f64>();
-                    let t = [r[0] + d * b.cos(), r[1] + d * b.sin()];
-                    if (x0..=x1).contains(&t[0]) && (y0..=y1).contains(&t[1]) {
-                        pick = Some((r, t));
-                        break;
+            .map_init(
+                || new_workspace(a.budget),
+                |ws, i| {
+                    let mut rng = rand_pcg::Pcg64::seed_from_u64(
+                        a.seed.wrapping_mul(0x2545_F491_4F6C_DD1D) ^ (i as u64 + 1),
+                    );
+                    // Draw a release point and a target at a hop length in range, both inside.
+                    let mut pick = None;
+                    for _ in 0..1000 {
+                        let r = [
+                            x0 + (x1 - x0) * rng.random::<f64>(),
+                            y0 + (y1 - y0) * rng.random::<f64>(),
+                        ];
+                        let d = cfg.hop_min_m
+                            + (hop_max - cfg.hop_min_m).max(0.0) * rng.random::<f64>();
+                        let b = std::f64::consts::TAU * rng.random::<f64>();
+                        let t = [r[0] + d * b.cos(), r[1] + d * b.sin()];
+                        if (x0..=x1).contains(&t[0]) && (y0..=y1).contains(&t[1]) {
+                            pick = Some((r, t));
+                            break;
+                        }
                     }
-                }
-                let (r, t) = pick.ok_or_else(|| anyhow!("run {i}: no hop fits the DEM"))?;
-                let out = fly(i, &dem, &nav, ws, &cfg, r, t, rng.random::<u64>());
-                pb.set_position(done.fetch_add(1, Ordering::Relaxed) as u64 + 1);
-                out
-            })
+                    let (r, t) = pick.ok_or_else(|| anyhow!("run {i}: no hop fits the DEM"))?;
+                    let out = fly(i, &dem, &nav, ws, &cfg, r, t, rng.random::<u64>());
+                    pb.set_position(done.fetch_add(1, Ordering::Relaxed) as u64 + 1);
+                    out
+                },
+            )
             .collect()
     });
     pb.finish_and_clear();
@@ -187,6 +196,7 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
     let summary = DescentSummary {
         runs: per_run.len(),
         seed: a.seed,
+        budget: a.budget.label(),
         landing_err_p50_m: pct(&mut land.clone(), 0.5),
         landing_err_p95_m: pct(&mut land.clone(), 0.95),
         landing_err_max_m: land.iter().copied().fold(0.0, f64::max),

@@ -8,12 +8,17 @@ use ground_sim::dem::read_geotiff;
 use ground_sim::evaluation::campaign::{
     CampaignSpec, PriorSpec, print_summary, run_campaign, summarize, write_csv,
 };
+use ground_sim::flyer::onboard::Budget;
 use ground_sim::reference::load;
 use nav_core::{NavConfig, Tile};
 
 /// Arguments of `ground-sim eval`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
+    /// Navigator budget: `flight` (the firmware's, what flies) or `host` (bigger than what
+    /// flies; labelled in every output).
+    #[arg(long, value_enum, default_value_t = Budget::Flight)]
+    pub budget: Budget,
     /// Reference folder (tile.bin, slope.tif).
     #[arg(long)]
     pub tile: PathBuf,
@@ -73,7 +78,9 @@ impl PriorArgs {
             scale_sigma: self.prior_scale_sigma,
         };
         if !(p.sigma_m > 0.0 && p.heading_sigma_deg >= 0.0 && p.scale_sigma >= 0.0)
-            || !(p.sigma_m.is_finite() && p.heading_sigma_deg.is_finite() && p.scale_sigma.is_finite())
+            || !(p.sigma_m.is_finite()
+                && p.heading_sigma_deg.is_finite()
+                && p.scale_sigma.is_finite())
         {
             anyhow::bail!("the prior's σ must be finite, the position σ > 0 and the others ≥ 0");
         }
@@ -93,6 +100,7 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         pixel_max_m: a.pixel_max_m,
         sensor: a.sensor.model(),
         prior: a.prior.spec()?,
+        budget: a.budget,
     };
     let pb = super::progress(a.trials as u64, "eval");
     let rows = run_campaign(tile, NavConfig::default(), &dem, &spec, &pb)?;

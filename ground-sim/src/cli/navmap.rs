@@ -60,10 +60,15 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
     std::fs::create_dir_all(&a.out)?;
     let stem = a.out.join("navmap");
     write_navmap(&m, reference.slope.as_ref(), &stem)?;
-    let files: Vec<PathBuf> = ["navmap.tif", "navmap-features.tif", "navmap-texture.tif", "navmap.png"]
-        .iter()
-        .map(|f| a.out.join(f))
-        .collect();
+    let files: Vec<PathBuf> = [
+        "navmap.tif",
+        "navmap-features.tif",
+        "navmap-texture.tif",
+        "navmap.png",
+    ]
+    .iter()
+    .map(|f| a.out.join(f))
+    .collect();
     let s = Summary {
         tile: a.tile.clone(),
         width_px: m.width,

@@ -12,11 +12,16 @@ use ground_sim::evaluation::suite::{
     SHARED_DATA_DIR, SuiteReport, SuiteSpec, TileKind, default_scenes, run_scene, suite_picture,
     table_markdown,
 };
+use ground_sim::flyer::onboard::Budget;
 use ground_sim::sar::cli::RadarArgs;
 
 /// Arguments of `ground-sim suite`.
 #[derive(Debug, Clone, clap::Args)]
 pub struct Args {
+    /// Navigator budget: `flight` (the firmware's, what flies) or `host` (bigger than what
+    /// flies; labelled in every output).
+    #[arg(long, value_enum, default_value_t = Budget::Flight)]
+    pub budget: Budget,
     /// Output folder: one sub-folder per scene (DEM, tiles, campaign CSV/JSON, navmaps) and
     /// `suite.json`, `suite.md`, `suite.png`.
     #[arg(long, default_value = "out/suite")]
@@ -110,6 +115,7 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         reference_pixel_m: 20.0,
         radar: super::insar::radar_config(&a.radar)?,
         navmap: NavmapThresholds::default(),
+        budget: a.budget,
     };
     let n_campaigns = scenes.len() * spec.kinds.len() * spec.priors.len();
     let pb = super::progress(n_campaigns as u64, "suite");
@@ -130,7 +136,11 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
                 .map(|r| format!(
                     "{}{}: {:.1} %",
                     r.kind.name(),
-                    if r.summary.prior.is_some() { "+prior" } else { "" },
+                    if r.summary.prior.is_some() {
+                        "+prior"
+                    } else {
+                        ""
+                    },
                     100.0 * r.summary.success_rate
                 ))
                 .collect::<Vec<_>>()
@@ -144,7 +154,11 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
     report.seconds = t0.elapsed().as_secs_f64();
     let table = table_markdown(&report);
     println!("\n{table}");
-    println!("suite: {} campaigns in {:.0} s", report.rows.len(), report.seconds);
+    println!(
+        "suite: {} campaigns in {:.0} s",
+        report.rows.len(),
+        report.seconds
+    );
     write_outputs(&report, &table, &a.out)
 }
 

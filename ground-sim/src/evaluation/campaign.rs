@@ -18,7 +18,7 @@ use serde::Serialize;
 use crate::dem::Dem;
 use crate::evaluation::trn::{TrnScore, score};
 use crate::flyer::frames::{FramePose, SensorModel, centre_extent, frame_reach_m, synth_frame};
-use crate::flyer::onboard::{FrameInput, WORKSPACE_STACK, new_workspace, run_frame};
+use crate::flyer::onboard::{Budget, FrameInput, WORKSPACE_STACK, new_workspace, run_frame};
 
 /// The prior a campaign hands the navigator with every frame: what the nav filter would know in
 /// flight, drawn around the truth with these 1σ (Gaussian, per frame, seeded with the trial).
@@ -47,6 +47,8 @@ pub struct CampaignSpec {
     pub sensor: SensorModel,
     /// The prior given with each frame; `None`: lost in space.
     pub prior: Option<PriorSpec>,
+    /// The navigator budget (the flight one unless asked otherwise).
+    pub budget: Budget,
 }
 
 /// Draw a standard normal variate (Box–Muller; one per call keeps the stream simple).
@@ -138,34 +140,37 @@ pub fn run_campaign(
     let rows: Vec<anyhow::Result<TrnScore>> = pool.install(|| {
         (0..spec.trials)
             .into_par_iter()
-            .map_init(new_workspace, |ws, i| {
-                // Each trial has its own seed: results do not depend on the thread count.
-                let mut rng = rand_pcg::Pcg64::seed_from_u64(
-                    spec.seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ i as u64,
-                );
-                let pose = FramePose {
-                    x_m: x0 + (x1 - x0) * rng.random::<f64>(),
-                    y_m: y0 + (y1 - y0) * rng.random::<f64>(),
-                    heading_rad: std::f64::consts::TAU * rng.random::<f64>(),
-                    pixel_m: spec.pixel_min_m
-                        + (spec.pixel_max_m - spec.pixel_min_m) * rng.random::<f64>(),
-                };
-                let frame = synth_frame(dem, &pose, &spec.sensor, rng.random::<u64>())?;
-                // The prior draws come after the frame's, so a campaign without a prior flies
-                // the very frames of the same campaign with one.
-                let prior = spec
-                    .prior
-                    .map(|p| prior_around(nav.tile(), &pose, &p, &mut rng));
-                let run = run_frame(
-                    &nav,
-                    ws,
-                    FrameInput::Dem(&frame.heights_m, frame.width, frame.height, pose.pixel_m),
-                    prior.as_ref(),
-                )
-                .map_err(|e| anyhow!("trial {i}: {e}"))?;
-                progress.set_position(done.fetch_add(1, Ordering::Relaxed) as u64 + 1);
-                Ok(score(nav.tile(), &run, &pose, frame.width, frame.height))
-            })
+            .map_init(
+                || new_workspace(spec.budget),
+                |ws, i| {
+                    // Each trial has its own seed: results do not depend on the thread count.
+                    let mut rng = rand_pcg::Pcg64::seed_from_u64(
+                        spec.seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ i as u64,
+                    );
+                    let pose = FramePose {
+                        x_m: x0 + (x1 - x0) * rng.random::<f64>(),
+                        y_m: y0 + (y1 - y0) * rng.random::<f64>(),
+                        heading_rad: std::f64::consts::TAU * rng.random::<f64>(),
+                        pixel_m: spec.pixel_min_m
+                            + (spec.pixel_max_m - spec.pixel_min_m) * rng.random::<f64>(),
+                    };
+                    let frame = synth_frame(dem, &pose, &spec.sensor, rng.random::<u64>())?;
+                    // The prior draws come after the frame's, so a campaign without a prior flies
+                    // the very frames of the same campaign with one.
+                    let prior = spec
+                        .prior
+                        .map(|p| prior_around(nav.tile(), &pose, &p, &mut rng));
+                    let run = run_frame(
+                        &nav,
+                        ws,
+                        FrameInput::Dem(&frame.heights_m, frame.width, frame.height, pose.pixel_m),
+                        prior.as_ref(),
+                    )
+                    .map_err(|e| anyhow!("trial {i}: {e}"))?;
+                    progress.set_position(done.fetch_add(1, Ordering::Relaxed) as u64 + 1);
+                    Ok(score(nav.tile(), &run, &pose, frame.width, frame.height))
+                },
+            )
             .collect()
     });
     rows.into_iter().collect()
@@ -180,6 +185,8 @@ pub struct EvalSummary {
     pub seed: u64,
     /// The prior given with each frame (`null`: none).
     pub prior: Option<PriorSpec>,
+    /// The navigator budget the frames were flown with (`flight` is what flies).
+    pub budget: String,
     /// Fraction of frames with a correct fix (≤ 3 reference px).
     pub success_rate: f64,
     /// Fraction of frames with a fix more than 3 reference px off.
@@ -279,6 +286,7 @@ pub fn summarize(rows: &[TrnScore], spec: &CampaignSpec) -> EvalSummary {
         trials: rows.len(),
         seed: spec.seed,
         prior: spec.prior,
+        budget: spec.budget.label(),
         success_rate: good.len() as f64 / n,
         false_fix_rate: (fixes.len() - good.len()) as f64 / n,
         false_fixes: fixes.len() - good.len(),
@@ -306,9 +314,10 @@ pub fn summarize(rows: &[TrnScore], spec: &CampaignSpec) -> EvalSummary {
 /// Print the summary's headline figures.
 pub fn print_summary(s: &EvalSummary) {
     println!(
-        "trials      {} (seed {}){}",
+        "trials      {} (seed {}), budget {}{}",
         s.trials,
         s.seed,
+        s.budget,
         s.prior.map_or(String::from(", no prior"), |p| format!(
             ", prior σ {} m, heading σ {}°",
             p.sigma_m, p.heading_sigma_deg

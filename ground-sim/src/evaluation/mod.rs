@@ -4,6 +4,6 @@
 pub mod campaign;
 pub mod descent;
 pub mod navmap;
-pub mod suite;
 pub mod register;
+pub mod suite;
 pub mod trn;

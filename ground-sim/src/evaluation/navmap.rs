@@ -101,7 +101,9 @@ impl NavMap {
         let h = tile.header();
         let (w, hh) = (h.width_px as usize, h.height_px as usize);
         let raster = tile.slope_raster().ok_or_else(|| {
-            anyhow::anyhow!("the tile carries no slope raster (tile format ≥ v3 built by ground-sim)")
+            anyhow::anyhow!(
+                "the tile carries no slope raster (tile format ≥ v3 built by ground-sim)"
+            )
         })?;
         if !(radius_m.is_finite() && radius_m > 0.0) {
             anyhow::bail!("footprint radius must be > 0 m, got {radius_m}");

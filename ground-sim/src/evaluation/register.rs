@@ -20,7 +20,9 @@ use serde::Serialize;
 use crate::dem::read_geotiff;
 use crate::reference::tile::{GeoGrid, MAX_TILE_FEATURES, build_tile};
 
-use crate::flyer::onboard::{FrameInput, MAX_FRAME_SIDE, new_workspace, run_frame, with_big_stack};
+use crate::flyer::onboard::{
+    Budget, FrameInput, MAX_FRAME_SIDE, new_workspace, run_frame, with_big_stack,
+};
 
 /// What the raster values are.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -291,7 +293,7 @@ pub fn register(
         RasterKind::Slope => Some(slope_pixels(frame, kind)?),
     };
     let run = with_big_stack(|| {
-        let mut ws = new_workspace();
+        let mut ws = new_workspace(Budget::Host);
         let input = match &frame_px {
             None => FrameInput::Dem(&frame.values, frame.width, frame.height, frame.pixel_m),
             Some(px) => FrameInput::Slope(px, frame.width, frame.height, frame.pixel_m),

@@ -7,8 +7,8 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Context, anyhow};
-use indicatif::ProgressBar;
 use image::{Rgb, RgbImage};
+use indicatif::ProgressBar;
 use nav_core::{NavConfig, Tile};
 use serde::Serialize;
 
@@ -16,6 +16,7 @@ use crate::dem::{Dem, Interpolation, read_geotiff, resample_to_pixel, write_geot
 use crate::evaluation::campaign::{CampaignSpec, EvalSummary, PriorSpec, run_campaign, summarize};
 use crate::evaluation::navmap::{NavMap, NavmapScore, NavmapThresholds};
 use crate::flyer::frames::SensorModel;
+use crate::flyer::onboard::Budget;
 use crate::insar::InsarConfig;
 use crate::insar::pipeline::run_from_dem;
 use crate::insar::products::{RunContext, SarSummary, write_outputs};
@@ -157,6 +158,8 @@ pub struct SuiteSpec {
     pub radar: (SarConfig, Polarisation),
     /// Navigability-map thresholds.
     pub navmap: NavmapThresholds,
+    /// Navigator budget (flight unless asked otherwise).
+    pub budget: Budget,
 }
 
 /// One campaign of the suite.
@@ -215,8 +218,7 @@ pub fn scene_dem(scene: &Scene) -> anyhow::Result<Dem> {
             size_m,
             pixel_m,
         } => {
-            let dem =
-                read_geotiff(path).with_context(|| format!("reading {}", path.display()))?;
+            let dem = read_geotiff(path).with_context(|| format!("reading {}", path.display()))?;
             let (x0, y0, x1, y1) = dem.extent_m();
             let (cx, cy) = (0.5 * (x0 + x1), 0.5 * (y0 + y1));
             let half = 0.5 * size_m;
@@ -285,11 +287,14 @@ pub fn run_scene(
         };
         let reference = crate::reference::load(&tdir)?;
         let tile = Tile::parse(&reference.tile_bytes).map_err(|e| anyhow!("{e}"))?;
-        let radius_m = 0.5
-            * spec.sensor.width_px.min(spec.sensor.height_px) as f64
-            * spec.pixel_range_m[0];
+        let radius_m =
+            0.5 * spec.sensor.width_px.min(spec.sensor.height_px) as f64 * spec.pixel_range_m[0];
         let navmap = NavMap::build(&tile, radius_m, spec.navmap)?;
-        write_navmap(&navmap, reference.slope.as_ref(), &dir.join(format!("navmap-{}", kind.name())))?;
+        write_navmap(
+            &navmap,
+            reference.slope.as_ref(),
+            &dir.join(format!("navmap-{}", kind.name())),
+        )?;
         for prior in &spec.priors {
             let cspec = CampaignSpec {
                 trials: spec.trials,
@@ -298,6 +303,7 @@ pub fn run_scene(
                 pixel_max_m: spec.pixel_range_m[1],
                 sensor: spec.sensor,
                 prior: *prior,
+                budget: spec.budget,
             };
             let tag = format!("{}-{}", kind.name(), prior_tag(prior.as_ref()));
             progress.set_message(format!("{}: {tag}", scene.name));
@@ -434,8 +440,15 @@ pub fn navmap_picture(m: &NavMap, slope_deg: &[f32]) -> RgbImage {
 
 /// The suite's table as Markdown: one row per campaign.
 pub fn table_markdown(r: &SuiteReport) -> String {
-    let mut s = String::from(
-        "| scene | tile | prior | success | false | no fix (reasons) | pos p50 / p95 m | heading p95 ° | in 3σ | NEES | ms/frame | navmap go: success / agree |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+    let mut s = format!(
+        "{} frames per campaign, campaign seed {}, navigator budget {}.\n\n",
+        r.spec.trials,
+        r.spec.seed,
+        r.spec.budget.label()
+    );
+    s += concat!(
+        "| scene | tile | prior | success | false | no fix (reasons) | pos p50 / p95 m | heading p95 ° | in 3σ | NEES | ms/frame | navmap go: success / agree |\n",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for row in &r.rows {
         let e = &row.summary;

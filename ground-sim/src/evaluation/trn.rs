@@ -183,19 +183,20 @@ pub struct FrameCheck {
 }
 
 /// Synthesise the frame at `pose` from `dem`, locate it against `tile` with the default
-/// navigator settings (no prior) and score it.
+/// navigator settings (no prior) within `budget` and score it.
 pub fn check_frame(
     dem: &crate::dem::Dem,
     tile: &Tile<'_>,
     pose: &FramePose,
     sensor: &crate::flyer::frames::SensorModel,
     seed: u64,
+    budget: crate::flyer::onboard::Budget,
 ) -> anyhow::Result<FrameCheck> {
     use crate::flyer::onboard::{FrameInput, new_workspace, run_frame, with_big_stack};
     let frame = crate::flyer::frames::synth_frame(dem, pose, sensor, seed)?;
     let nav = nav_core::Navigator::new(*tile, nav_core::NavConfig::default());
     let run = with_big_stack(|| {
-        let mut ws = new_workspace();
+        let mut ws = new_workspace(budget);
         let input = FrameInput::Dem(&frame.heights_m, frame.width, frame.height, pose.pixel_m);
         run_frame(&nav, &mut ws, input, None).map_err(|e| anyhow::anyhow!("{e}"))
     })?;

@@ -1,28 +1,72 @@
 //! The flight code as the ground segment runs it: nav-core's `Navigator` with a fixed-capacity
 //! workspace, plus what the ground side wants back from a frame (timing, matched pairs).
+//!
+//! Two budgets: [`Budget::Flight`], the firmware's own ([`nav_core::flight`]: 200 × 200 px
+//! frames, 16 keypoints, 128 matches), which every campaign uses unless told otherwise, and
+//! [`Budget::Host`], a bigger one for frames up to 512 px and image registration on the ground,
+//! only ever chosen explicitly and labelled in every output.
 
 use std::time::Instant;
 
 use nav_core::frame::SlopePx;
 use nav_core::{DemPatch, FrameReport, NavError, NavWorkspace, Navigator, Prior, SlopeImage};
 
-/// Largest frame side the ground-side workspace holds, pixels.
+/// Largest frame side the host-budget workspace holds, pixels.
 pub const MAX_FRAME_SIDE: usize = 512;
-/// Frame keypoint budget (as on the flyer).
-pub const FRAME_KEYPOINTS: usize = 256;
-/// Match list capacity.
-pub const MAX_MATCHES: usize = 256;
+/// Frame keypoint budget of the host budget (the flight budget keeps
+/// [`nav_core::flight::MAX_KEYPOINTS`]).
+pub const HOST_KEYPOINTS: usize = 256;
+/// Match list capacity of the host budget.
+pub const HOST_MATCHES: usize = 256;
 /// Stack a thread needs to build a [`Workspace`] in place, bytes.
 pub const WORKSPACE_STACK: usize = 64 << 20;
 
-/// The onboard workspace (a few MiB of fixed arrays; build it on a thread with
-/// [`WORKSPACE_STACK`] of stack).
-pub type Workspace =
-    NavWorkspace<{ MAX_FRAME_SIDE * MAX_FRAME_SIDE }, MAX_FRAME_SIDE, FRAME_KEYPOINTS, MAX_MATCHES>;
+/// Which navigator budget a ground run uses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum Budget {
+    /// The firmware's: [`nav_core::flight`] (200 × 200 px frames, 16 keypoints, 128 matches).
+    #[default]
+    Flight,
+    /// Bigger than what flies: 512 × 512 px frames, 256 keypoints, 256 matches.
+    Host,
+}
 
-/// A fresh boxed workspace.
-pub fn new_workspace() -> Box<Workspace> {
-    Box::new(Workspace::new())
+impl Budget {
+    /// A label for outputs, with the budget's figures.
+    pub fn label(self) -> String {
+        match self {
+            Self::Flight => format!(
+                "flight ({} keypoints, {} matches)",
+                nav_core::flight::MAX_KEYPOINTS,
+                nav_core::flight::MAX_MATCHES
+            ),
+            Self::Host => format!(
+                "host, bigger than what flies ({HOST_KEYPOINTS} keypoints, {HOST_MATCHES} matches)"
+            ),
+        }
+    }
+}
+
+/// The host budget's workspace.
+pub type HostWorkspace =
+    NavWorkspace<{ MAX_FRAME_SIDE * MAX_FRAME_SIDE }, MAX_FRAME_SIDE, HOST_KEYPOINTS, HOST_MATCHES>;
+
+/// The onboard workspace of either budget (fixed arrays, up to a few MiB: build it on a thread
+/// with [`WORKSPACE_STACK`] of stack).
+pub enum Workspace {
+    /// [`Budget::Flight`].
+    Flight(Box<nav_core::flight::Workspace>),
+    /// [`Budget::Host`].
+    Host(Box<HostWorkspace>),
+}
+
+/// A fresh workspace of `budget`.
+pub fn new_workspace(budget: Budget) -> Workspace {
+    match budget {
+        Budget::Flight => Workspace::Flight(Box::new(nav_core::flight::Workspace::new())),
+        Budget::Host => Workspace::Host(Box::new(HostWorkspace::new())),
+    }
 }
 
 /// One frame's input.
@@ -49,6 +93,18 @@ pub struct FrameRun {
 pub fn run_frame(
     nav: &Navigator<'_>,
     ws: &mut Workspace,
+    input: FrameInput<'_>,
+    prior: Option<&Prior>,
+) -> Result<FrameRun, NavError> {
+    match ws {
+        Workspace::Flight(w) => run_with(nav, w, input, prior),
+        Workspace::Host(w) => run_with(nav, w, input, prior),
+    }
+}
+
+fn run_with<const P: usize, const W: usize, const K: usize, const M: usize>(
+    nav: &Navigator<'_>,
+    ws: &mut NavWorkspace<P, W, K, M>,
     input: FrameInput<'_>,
     prior: Option<&Prior>,
 ) -> Result<FrameRun, NavError> {

@@ -1,0 +1,25 @@
+//! The flight configuration: the frame and keypoint budgets the firmware is built with. The
+//! firmware sizes its buffers with these constants, the HIL host runner builds the identical
+//! workspace, and the ground segment's campaigns (`eval`, `suite`, `descent`, `results`) use it
+//! by default, so every published figure measures what flies. One place, so they never drift.
+
+use crate::NavWorkspace;
+
+/// Widest frame the firmware accepts, pixels.
+pub const MAX_FRAME_WIDTH: usize = 200;
+/// Largest frame the firmware accepts, pixels (200 × 200).
+pub const MAX_FRAME_PX: usize = MAX_FRAME_WIDTH * 200;
+/// Frame keypoint budget on the target: the strongest keypoints are kept, the rest counted in
+/// `features_dropped`.
+///
+/// **A trade-off for the instruction budget** (see `docs/bounds.md`, firmware section): each kept
+/// keypoint costs ≈ 0.13 M instructions to describe and ≈ 0.08 M to match against the
+/// 457-feature tile, on top of ≈ 11–17 M per frame for slope and detection. Measured worst case
+/// over the recorded set: 19.05 M at 16, 19.85 M at 20, 21.1 M at 24, 22.6 M at 32, 67.6 M at 256
+/// keypoints.
+pub const MAX_KEYPOINTS: usize = 16;
+/// Putative-match budget per frame.
+pub const MAX_MATCHES: usize = 128;
+
+/// The navigator workspace of the flight configuration (≈ 0.3 MB; a `static` on the target).
+pub type Workspace = NavWorkspace<MAX_FRAME_PX, MAX_FRAME_WIDTH, MAX_KEYPOINTS, MAX_MATCHES>;
