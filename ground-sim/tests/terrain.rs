@@ -224,3 +224,120 @@ fn cli_terrain_info_and_errors() {
         (40, 40, 20.0)
     );
 }
+
+/// The real LOLA 5 m south-pole tile (see ../shared/data/README.md), relative to the repo root.
+const LOLA_TILE: &str = concat!(
+    env!("CARGO_MANIFEST_DIR"),
+    "/../../shared/data/lola-south-pole-site-5m-256.tif"
+);
+/// The tile's figures as `dem_stats` measures them: slope p50, p90, p99 (degrees) and closed
+/// depressions per km² in 10–20, 20–40 and 40–80 m (9, 8 and 3 depressions on 1.6384 km²).
+const LOLA_TILE_STATS: [f64; 6] = [4.277, 9.975, 19.404, 5.493, 4.883, 1.831];
+
+fn calibration_figures(s: &ground_sim::analysis::DemStats) -> [f64; 6] {
+    let dep = |lo: f64| {
+        s.depressions
+            .iter()
+            .find(|b| b.d_min_m == lo)
+            .map_or(f64::NAN, |b| b.per_km2)
+    };
+    [
+        s.slope_p50_deg,
+        s.slope_p90_deg,
+        s.slope_p99_deg,
+        dep(10.0),
+        dep(20.0),
+        dep(40.0),
+    ]
+}
+
+#[test]
+fn lola_preset_matches_the_real_lola_tile() {
+    let path = std::path::Path::new(LOLA_TILE);
+    let tile = if path.is_file() {
+        let dem = ground_sim::dem::read_geotiff(path).unwrap();
+        let t = calibration_figures(&dem_stats(&dem).unwrap());
+        println!("checking against the real tile {LOLA_TILE}: {t:.3?}");
+        for (m, r) in t.iter().zip(LOLA_TILE_STATS) {
+            assert!(
+                (m - r).abs() < 0.001,
+                "recorded figures {LOLA_TILE_STATS:?} differ from the file's {t:?}"
+            );
+        }
+        t
+    } else {
+        println!("../shared/data absent: checking against the tile's recorded figures");
+        LOLA_TILE_STATS
+    };
+    let names = [
+        "slope p50",
+        "slope p90",
+        "slope p99",
+        "dep 10-20",
+        "dep 20-40",
+        "dep 40-80",
+    ];
+    for seed in 1..=3 {
+        let mut p = TerrainParams::new(Preset::Lola);
+        p.seed = seed;
+        let (dem, _) = generate(&p, &ProgressBar::hidden()).unwrap();
+        assert_eq!((dem.width(), dem.height()), (800, 800));
+        let m = calibration_figures(&dem_stats(&dem).unwrap());
+        println!("lola seed {seed}: {m:.2?}");
+        for k in 0..6 {
+            // Slopes within ±25 %, depression densities within a factor 1.5.
+            let (lo, hi) = if k < 3 {
+                (0.75 * tile[k], 1.25 * tile[k])
+            } else {
+                (tile[k] / 1.5, tile[k] * 1.5)
+            };
+            assert!(
+                (lo..=hi).contains(&m[k]),
+                "seed {seed}: {} {:.2} outside {lo:.2}..={hi:.2}",
+                names[k],
+                m[k]
+            );
+        }
+    }
+}
+
+#[test]
+fn plains_are_smooth_but_not_blank() {
+    for seed in 1..=3 {
+        let mut p = TerrainParams::new(Preset::Plains);
+        p.seed = seed;
+        let (dem, _) = generate(&p, &ProgressBar::hidden()).unwrap();
+        let s = dem_stats(&dem).unwrap();
+        println!(
+            "plains seed {seed}: p50 {:.2}, p90 {:.2}, p99 {:.2}",
+            s.slope_p50_deg, s.slope_p90_deg, s.slope_p99_deg
+        );
+        assert!(s.slope_p50_deg <= 2.0, "seed {seed}: {s:?}");
+        // Texture and some craters remain: not a plane.
+        assert!(s.slope_p50_deg >= 0.5 && s.slope_p90_deg >= 2.5, "{s:?}");
+    }
+}
+
+#[test]
+fn fresh_crater_has_simple_crater_morphometry() {
+    let p = TerrainParams::new(Preset::Fresh);
+    let (dem, _) = generate(&p, &ProgressBar::hidden()).unwrap();
+    let s = dem_stats(&dem).unwrap();
+    let c = s.main_crater.unwrap();
+    println!(
+        "fresh floor: D {:.0} m, d/D {:.3}, p99 {:.2}, p99.9 {:.2}",
+        c.diameter_m, c.d_over_d, s.slope_p99_deg, s.slope_p999_deg
+    );
+    assert!((2000.0..=2600.0).contains(&c.diameter_m), "{c:?}");
+    assert!((0.17..=0.23).contains(&c.d_over_d), "{c:?}");
+    assert!((28.0..=38.0).contains(&s.slope_p999_deg), "{s:?}");
+    let mut p = TerrainParams::new(Preset::Fresh);
+    p.window = Window::Rim;
+    let (dem, _) = generate(&p, &ProgressBar::hidden()).unwrap();
+    let s = dem_stats(&dem).unwrap();
+    println!(
+        "fresh rim: p50 {:.2}, p99 {:.2}",
+        s.slope_p50_deg, s.slope_p99_deg
+    );
+    assert!((28.0..=38.0).contains(&s.slope_p99_deg), "{s:?}");
+}
