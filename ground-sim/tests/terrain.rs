@@ -234,7 +234,7 @@ const LOLA_TILE: &str = concat!(
 /// depressions per km² in 10–20, 20–40 and 40–80 m (9, 8 and 3 depressions on 1.6384 km²).
 const LOLA_TILE_STATS: [f64; 6] = [4.277, 9.975, 19.404, 5.493, 4.883, 1.831];
 
-fn calibration_figures(s: &ground_sim::analysis::DemStats) -> [f64; 6] {
+fn calibration_figures(s: &ground_sim::dem::stats::DemStats) -> [f64; 6] {
     let dep = |lo: f64| {
         s.depressions
             .iter()

@@ -77,11 +77,10 @@ impl PriorArgs {
             heading_sigma_deg: self.prior_heading_sigma_deg,
             scale_sigma: self.prior_scale_sigma,
         };
-        if !(p.sigma_m > 0.0 && p.heading_sigma_deg >= 0.0 && p.scale_sigma >= 0.0)
-            || !(p.sigma_m.is_finite()
-                && p.heading_sigma_deg.is_finite()
-                && p.scale_sigma.is_finite())
-        {
+        let finite = [p.sigma_m, p.heading_sigma_deg, p.scale_sigma]
+            .iter()
+            .all(|v| v.is_finite());
+        if !(finite && p.sigma_m > 0.0 && p.heading_sigma_deg >= 0.0 && p.scale_sigma >= 0.0) {
             anyhow::bail!("the prior's σ must be finite, the position σ > 0 and the others ≥ 0");
         }
         Ok(Some(p))

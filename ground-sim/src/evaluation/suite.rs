@@ -72,6 +72,18 @@ pub fn default_scenes(seed: u64, size_m: f64, shared: Option<&Path>) -> Vec<Scen
     };
     let mut v = vec![
         syn(
+            "plains",
+            "smooth young plains, slope median ≤ 2° (the weak case)",
+            Preset::Plains,
+            Window::Floor,
+        ),
+        syn(
+            "lola",
+            "cratered plain calibrated on the real LOLA 5 m tile",
+            Preset::Lola,
+            Window::Floor,
+        ),
+        syn(
             "shoemaker",
             "dense old floor (the project's first preset)",
             Preset::Shoemaker,
@@ -82,6 +94,18 @@ pub fn default_scenes(seed: u64, size_m: f64, shared: Option<&Path>) -> Vec<Scen
             "Shackleton floor (dense)",
             Preset::Shackleton,
             Window::Floor,
+        ),
+        syn(
+            "fresh-floor",
+            "fresh 2.3 km simple crater, d/D 0.2, 30–35° walls: the whole bowl",
+            Preset::Fresh,
+            Window::Floor,
+        ),
+        syn(
+            "fresh-rim",
+            "the same fresh crater's rim crest",
+            Preset::Fresh,
+            Window::Rim,
         ),
         syn(
             "shackleton-wall",

@@ -1,0 +1,197 @@
+//! The terrain suite and the navigability map: `suite --quick` writes a table, a picture, JSON and
+//! per-frame CSVs that agree with each other; the navmap's footprint sums match a brute-force
+//! count; `eval` takes a prior; bad input gives a clear error.
+
+// Test helpers outside #[test] functions may unwrap too: a failure is a test failure.
+#![allow(clippy::unwrap_used)]
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+use ground_sim::evaluation::navmap::{NavMap, NavmapThresholds};
+use ground_sim::reference::{
+    Smoothing, load, reference_dem, reference_surf_config, write_reference,
+};
+use ground_sim::terrain::{Preset, TerrainParams, generate};
+use indicatif::ProgressBar;
+use nav_core::Tile;
+
+fn ground_sim(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_ground-sim"))
+        .args(args)
+        .output()
+        .expect("ground-sim runs")
+}
+
+fn run(args: &[&str]) -> String {
+    let out = ground_sim(args);
+    let text = String::from_utf8_lossy(&out.stdout).to_string();
+    assert!(
+        out.status.success(),
+        "ground-sim {args:?} failed:\n{text}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    text
+}
+
+fn path(p: &Path) -> &str {
+    p.to_str().expect("utf-8 temp path")
+}
+
+fn json(p: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap()
+}
+
+#[test]
+fn quick_suite_outputs_agree_with_each_other() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("suite");
+    run(&[
+        "suite",
+        "--quick",
+        "--scenes",
+        "lola,fresh-rim",
+        "--kinds",
+        "truth",
+        "--out",
+        path(&out),
+    ]);
+    let r = json(&out.join("suite.json"));
+    let rows = r["rows"].as_array().unwrap();
+    // 2 scenes × 1 tile kind × {no prior, prior}.
+    assert_eq!(rows.len(), 4, "{r}");
+    assert!(out.join("suite.png").exists() && out.join("suite.md").exists());
+    let table = std::fs::read_to_string(out.join("suite.md")).unwrap();
+    assert!(table.contains("| lola | truth") && table.contains("| fresh-rim | truth"));
+    assert!(table.contains("budget flight"), "{table}");
+    for row in rows {
+        let scene = row["scene"].as_str().unwrap();
+        let s = &row["summary"];
+        let tag = if s["prior"].is_null() {
+            "truth-noprior".to_string()
+        } else {
+            assert_eq!(s["prior"]["sigma_m"], 50.0);
+            "truth-prior50m2deg".to_string()
+        };
+        let csv = std::fs::read_to_string(out.join(scene).join(format!("{tag}.csv"))).unwrap();
+        let lines: Vec<&str> = csv.lines().skip(1).collect();
+        assert_eq!(lines.len(), 40, "{scene} {tag}");
+        // Success in the summary = fixes that are not false in the per-frame CSV.
+        let ok = lines
+            .iter()
+            .filter(|l| {
+                let c: Vec<&str> = l.split(',').collect();
+                c[5] == "true" && c[6] == "false"
+            })
+            .count();
+        let rate = s["success_rate"].as_f64().unwrap();
+        assert!((rate - ok as f64 / 40.0).abs() < 1e-12, "{scene} {tag}");
+        // The navmap score counts the same frames as its per-frame CSV.
+        let nm =
+            std::fs::read_to_string(out.join(scene).join(format!("{tag}-navmap.csv"))).unwrap();
+        let go: Vec<(bool, bool)> = nm
+            .lines()
+            .skip(1)
+            .map(|l| {
+                let c: Vec<&str> = l.split(',').collect();
+                (c[4] == "true", c[5] == "true")
+            })
+            .collect();
+        assert_eq!(go.len(), 40);
+        let n = &row["navmap"];
+        assert_eq!(
+            n["go_frames"].as_u64().unwrap() as usize,
+            go.iter().filter(|g| g.0).count()
+        );
+        assert_eq!(
+            n["go_success"].as_u64().unwrap() as usize,
+            go.iter().filter(|g| g.0 && g.1).count()
+        );
+        assert_eq!(go.iter().filter(|g| g.1).count(), ok);
+        for f in ["navmap-truth.tif", "navmap-truth.png", "dem.tif"] {
+            assert!(out.join(scene).join(f).exists(), "{scene}/{f}");
+        }
+    }
+}
+
+#[test]
+fn navmap_footprint_sums_match_a_brute_force_count() {
+    let mut p = TerrainParams::new(Preset::Lola);
+    p.size_m = 2000.0;
+    let (dem, _) = generate(&p, &ProgressBar::hidden()).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let r = reference_dem(&dem, 20.0).unwrap();
+    write_reference(
+        &r,
+        dir.path(),
+        &reference_surf_config(),
+        1000,
+        Smoothing::default_for_truth(),
+    )
+    .unwrap();
+    let reference = load(dir.path()).unwrap();
+    let tile = Tile::parse(&reference.tile_bytes).unwrap();
+    assert!(tile.len() > 10, "{} features", tile.len());
+    let radius_m = 300.0;
+    let m = NavMap::build(&tile, radius_m, NavmapThresholds::default()).unwrap();
+    let rad = radius_m / 20.0;
+    let raster = tile.slope_raster().unwrap();
+    for &(c, r) in &[(0usize, 0usize), (15, 15), (50, 40), (99, 99), (30, 70)] {
+        let i = r * m.width + c;
+        let brute = (0..tile.len())
+            .filter(|&k| {
+                let kp = tile.keypoint(k);
+                let (dc, dr) = (
+                    kp.x_px.round() as f64 - c as f64,
+                    kp.y_px.round() as f64 - r as f64,
+                );
+                // The map's disk: rows within the radius, columns within the row's half-chord.
+                dr.abs() <= rad.floor() && dc.abs() <= (rad * rad - dr * dr).max(0.0).sqrt().floor()
+            })
+            .count();
+        assert_eq!(m.features[i] as usize, brute, "cell ({c}, {r})");
+        let inside = c as f64 >= rad.floor()
+            && r as f64 >= rad.floor()
+            && ((c as f64 + rad.floor()) as usize) < m.width
+            && ((r as f64 + rad.floor()) as usize) < m.height;
+        assert_eq!(m.inside[i], inside, "cell ({c}, {r})");
+        if inside {
+            // Inside the map the whole disk is on valid raster except its border row/column.
+            assert!(m.valid_frac[i] > 0.9, "cell ({c}, {r}) {}", m.valid_frac[i]);
+        }
+    }
+    assert!(raster.width() == m.width && raster.height() == m.height);
+    // Off-map cells are never "go" and are NaN in the go layer.
+    let layer = m.go_layer();
+    assert!(layer[0].is_nan() && !m.go(0));
+    // A stricter feature threshold can only shrink the "go" area.
+    let strict = NavMap::build(
+        &tile,
+        radius_m,
+        NavmapThresholds {
+            min_features: 1e9,
+            ..NavmapThresholds::default()
+        },
+    )
+    .unwrap();
+    assert_eq!(strict.go_fraction(), 0.0);
+    assert!(m.go_fraction() >= strict.go_fraction());
+}
+
+#[test]
+fn suite_and_navmap_refuse_bad_input_clearly() {
+    let out = ground_sim(&["suite", "--quick", "--scenes", "nowhere", "--out", "/tmp/x"]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("no scene named \"nowhere\""), "{err}");
+    let dir = tempfile::tempdir().unwrap();
+    let out = ground_sim(&[
+        "navmap",
+        "--tile",
+        path(dir.path()),
+        "--out",
+        path(dir.path()),
+    ]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("tile.bin"));
+}
