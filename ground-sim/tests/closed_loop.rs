@@ -82,6 +82,24 @@ fn tile_trn_eval_and_descent_on_a_generated_scene() {
     assert!(t["pos_err_max_px"].as_f64().unwrap() < 1.0, "{t}");
     assert!(dir.path().join("trn.png").exists());
 
+    // The flight budget (the default, what flies) must never give a false fix; the chain's
+    // success bar is asserted with the host budget it was set for (docs/results.md has both).
+    run(&[
+        "eval",
+        "--tile",
+        &d("ref"),
+        "--dem",
+        &d("dem.tif"),
+        "--trials",
+        "40",
+        "--seed",
+        "5",
+        "--json",
+        &d("eval-flight.json"),
+    ]);
+    let e = json(&dir.path().join("eval-flight.json"));
+    assert_eq!(e["false_fixes"], 0, "{e}");
+    assert!(e["budget"].as_str().unwrap().starts_with("flight"), "{e}");
     let text = run(&[
         "eval",
         "--tile",
@@ -92,6 +110,8 @@ fn tile_trn_eval_and_descent_on_a_generated_scene() {
         "40",
         "--seed",
         "5",
+        "--budget",
+        "host",
         "--json",
         &d("eval.json"),
     ]);

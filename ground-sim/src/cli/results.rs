@@ -90,7 +90,7 @@ fn suite_section(
         "suite",
         "--out",
         &d,
-        "--seed",
+        "--campaign-seed",
         &seed,
         "--terrain-seed",
         &seed,

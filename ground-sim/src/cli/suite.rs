@@ -29,9 +29,9 @@ pub struct Args {
     /// Frames per campaign.
     #[arg(long, default_value_t = 300)]
     pub trials: usize,
-    /// Campaign seed (frame poses, noise, prior draws).
+    /// Campaign seed (frame poses, noise, prior draws; `--seed` is the radar's noise seed).
     #[arg(long, default_value_t = 1)]
-    pub seed: u64,
+    pub campaign_seed: u64,
     /// Terrain seed of the synthetic scenes.
     #[arg(long, default_value_t = 1)]
     pub terrain_seed: u64,
@@ -107,7 +107,7 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
     };
     let spec = SuiteSpec {
         trials,
-        seed: a.seed,
+        seed: a.campaign_seed,
         pixel_range_m: [9.0, 11.0],
         sensor,
         kinds: a.kinds.clone(),
