@@ -105,7 +105,8 @@ pub const FRESH_FLOOR_DIAMETER_M: f64 = 706.0;
 /// Age of the `fresh` crater, Gyr (Copernican: few superposed craters).
 pub const FRESH_AGE_GYR: f64 = 0.1;
 
-/// Where the scene window sits in the host crater.
+/// Where the scene window sits in the host crater (presets without one, `lola` and `plains`,
+/// give the same scene, centred on the map origin, for every window).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, clap::ValueEnum)]
 #[serde(rename_all = "lowercase")]
 pub enum Window {
