@@ -2,8 +2,10 @@
 //!
 //! A scene is the sum of three parts, evaluated on a north-up grid whose map frame has the host
 //! crater's centre at (0, 0) m, x east, y north:
-//! 1. the host crater ([`crater::HostProfile`]): Shackleton (simple, ~21 km) or Shoemaker
-//!    (complex, ~51 km, flat floor, terraced walls), with a slightly irregular rim;
+//! 1. the host crater ([`crater::HostProfile`]): Shackleton (simple, ~21 km), Shoemaker
+//!    (complex, ~51 km, flat floor, terraced walls) or a fresh 2.3 km simple crater, with a
+//!    slightly irregular rim; none for the plains (`lola`, `plains`), which may have a regional
+//!    tilt instead (map frame origin at the scene centre);
 //! 2. superposed small craters drawn from a Neukum production function capped by the empirical
 //!    equilibrium density ([`sfd`]), each with Pike's fresh morphometry and degraded by
 //!    topographic diffusion according to its age ([`crater`]);
@@ -58,13 +60,14 @@ pub enum Preset {
 /// Age of the `lola` plain (and of `fresh`'s surroundings), Gyr: the pre-Nectarian intercrater
 /// plains around Shoemaker; old enough that craters below ~1 km are in equilibrium.
 pub const LOLA_PLAIN_AGE_GYR: f64 = 4.0;
-/// Factor on `N_obs` for the `lola`, `plains` and `fresh` presets: the fraction of the
-/// equilibrium population that LOLA's 5 m grid (interpolated between tracks tens of metres apart)
-/// still shows as closed depressions. Calibrated on the 5 m south-pole tile (docs/terrain.md).
+/// Factor on `N_obs` below [`LOLA_RESOLVED_D_M`] for the `lola`, `plains` and `fresh` presets:
+/// the share of the equilibrium population of small craters that LOLA's 5 m grid (interpolated
+/// between tracks tens of metres apart) still shows. Calibrated on the 5 m south-pole tile's
+/// closed depressions (docs/terrain.md).
 pub const LOLA_CRATER_DENSITY: f64 = 0.18;
 /// Crater diameter (metres) from which `lola` sees the full model density.
 pub const LOLA_RESOLVED_D_M: f64 = 100.0;
-/// Largest superposed crater of the `lola`, `plains` and `fresh` plains, metres.
+/// Largest superposed crater of the `lola` and `fresh` plains, metres.
 pub const LOLA_MAX_CRATER_M: f64 = 800.0;
 /// Regional slope of the `lola` plain, degrees: the plane fitted to the 5 m tile dips 3.25°
 /// (it lies on the regional rise outside Shoemaker's rim).
@@ -78,9 +81,12 @@ pub const LOLA_ROUGHNESS: Roughness = Roughness {
 };
 /// Age of the `plains` surface, Gyr: a young (Eratosthenian) mare flow.
 pub const PLAINS_AGE_GYR: f64 = 1.2;
-/// Hurst exponent of the `plains` roughness (maria are smoother at long baselines than
-/// highlands: Rosenburg et al. 2011 find H ≈ 0.8 there).
+/// Hurst exponent of the `plains` roughness: below the highlands' 0.9, as maria have less
+/// long-baseline relief (Rosenburg et al. 2011); the value itself is our choice.
 pub const PLAINS_HURST: f64 = 0.8;
+/// Largest superposed crater of the `plains`, metres: on a young surface the few large craters
+/// are fresh; a window between craters larger than 500 m keeps slope p90 at 3.5–5°.
+pub const PLAINS_MAX_CRATER_M: f64 = 500.0;
 /// Regional slope of the `plains`, degrees (mare surfaces are nearly level).
 pub const PLAINS_REGIONAL_SLOPE_DEG: f64 = 0.0;
 /// RMS height difference at 5 m of the `plains` roughness, metres.
@@ -99,7 +105,8 @@ pub const FRESH_FLOOR_DIAMETER_M: f64 = 706.0;
 /// Age of the `fresh` crater, Gyr (Copernican: few superposed craters).
 pub const FRESH_AGE_GYR: f64 = 0.1;
 
-/// Where the scene window sits in the host crater.
+/// Where the scene window sits in the host crater (presets without one, `lola` and `plains`,
+/// give the same scene, centred on the map origin, for every window).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, clap::ValueEnum)]
 #[serde(rename_all = "lowercase")]
 pub enum Window {
@@ -237,7 +244,7 @@ impl Preset {
                 age_gyr: PLAINS_AGE_GYR,
                 crater_density: LOLA_CRATER_DENSITY,
                 resolved_d_m: LOLA_RESOLVED_D_M,
-                max_crater_m: Some(LOLA_MAX_CRATER_M),
+                max_crater_m: Some(PLAINS_MAX_CRATER_M),
                 regional_slope_deg: PLAINS_REGIONAL_SLOPE_DEG,
                 roughness: Roughness {
                     hurst: PLAINS_HURST,
