@@ -35,3 +35,22 @@ pub mod pictures;
 pub mod reference;
 pub mod sar;
 pub mod terrain;
+
+use std::path::Path;
+
+use anyhow::Context;
+
+/// Create the parent folder of an output file.
+pub fn ensure_parent(path: &Path) -> anyhow::Result<()> {
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
+    Ok(())
+}
+
+/// Write `value` as pretty JSON to `path`, creating parent folders.
+pub fn write_json<T: serde::Serialize>(path: &Path, value: &T) -> anyhow::Result<()> {
+    ensure_parent(path)?;
+    let text = serde_json::to_string_pretty(value)?;
+    std::fs::write(path, text + "\n").with_context(|| format!("writing {}", path.display()))
+}

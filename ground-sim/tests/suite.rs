@@ -51,27 +51,36 @@ fn quick_suite_outputs_agree_with_each_other() {
         "--quick",
         "--scenes",
         "lola,fresh-rim",
-        "--kinds",
-        "truth",
         "--out",
         path(&out),
     ]);
     let r = json(&out.join("suite.json"));
     let rows = r["rows"].as_array().unwrap();
-    // 2 scenes × 1 tile kind × {no prior, prior}.
-    assert_eq!(rows.len(), 4, "{r}");
+    // 2 scenes × {truth, InSAR tile} × {no prior, prior}.
+    assert_eq!(rows.len(), 8, "{r}");
+    for sc in r["scenes"].as_array().unwrap() {
+        // The InSAR tile's accuracy is carried into the report (noise-free radar: metres, not
+        // tens of metres).
+        let h = sc["insar_height_rmse_m"].as_f64().unwrap();
+        assert!(h > 0.0 && h < 10.0, "{sc}");
+    }
+    assert!(
+        r["spec"]["radar"]["baseline_m"].as_f64().is_some(),
+        "radar not recorded"
+    );
     assert!(out.join("suite.png").exists() && out.join("suite.md").exists());
     let table = std::fs::read_to_string(out.join("suite.md")).unwrap();
-    assert!(table.contains("| lola | truth") && table.contains("| fresh-rim | truth"));
+    assert!(table.contains("| lola | truth") && table.contains("| fresh-rim | insar"));
     assert!(table.contains("budget flight"), "{table}");
     for row in rows {
         let scene = row["scene"].as_str().unwrap();
         let s = &row["summary"];
+        let kind = row["kind"].as_str().unwrap();
         let tag = if s["prior"].is_null() {
-            "truth-noprior".to_string()
+            format!("{kind}-noprior")
         } else {
             assert_eq!(s["prior"]["sigma_m"], 50.0);
-            "truth-prior50m2deg".to_string()
+            format!("{kind}-prior50m2deg")
         };
         let csv = std::fs::read_to_string(out.join(scene).join(format!("{tag}.csv"))).unwrap();
         let lines: Vec<&str> = csv.lines().skip(1).collect();
@@ -108,8 +117,8 @@ fn quick_suite_outputs_agree_with_each_other() {
             go.iter().filter(|g| g.0 && g.1).count()
         );
         assert_eq!(go.iter().filter(|g| g.1).count(), ok);
-        for f in ["navmap-truth.tif", "navmap-truth.png", "dem.tif"] {
-            assert!(out.join(scene).join(f).exists(), "{scene}/{f}");
+        for f in [format!("navmap-{kind}.tif"), format!("navmap-{kind}.png")] {
+            assert!(out.join(scene).join(&f).exists(), "{scene}/{f}");
         }
     }
 }

@@ -6,9 +6,10 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 
 use anyhow::{Context, anyhow, bail};
 use ground_sim::dem::read_geotiff;
+use ground_sim::evaluation::campaign::percentile;
 use ground_sim::evaluation::descent::{DescentConfig, RunResult, fly};
 use ground_sim::flyer::frames::{centre_extent, frame_reach_m};
-use ground_sim::flyer::onboard::{Budget, WORKSPACE_STACK, new_workspace};
+use ground_sim::flyer::onboard::{WORKSPACE_STACK, new_workspace};
 use ground_sim::pictures::plot::{Plot, Series, Style};
 use ground_sim::reference::load;
 use nav_core::{NavConfig, Navigator, Tile};
@@ -19,10 +20,6 @@ use serde::Serialize;
 /// Arguments of `ground-sim descent`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// Navigator budget: `flight` (the firmware's, what flies) or `host` (bigger than what
-    /// flies; labelled in every output).
-    #[arg(long, value_enum, default_value_t = Budget::Flight)]
-    pub budget: Budget,
     /// Reference folder (tile.bin).
     #[arg(long)]
     pub tile: PathBuf,
@@ -56,6 +53,9 @@ pub struct Args {
     /// Folder for the trajectory and error pictures of the first run (default: beside the JSON).
     #[arg(long)]
     pub png: Option<PathBuf>,
+    /// The navigator budget.
+    #[command(flatten)]
+    pub budget: super::BudgetArgs,
 }
 
 /// Campaign summary (the JSON of `ground-sim descent`).
@@ -93,13 +93,6 @@ pub struct DescentSummary {
     pub config: DescentConfig,
     /// Per-run results.
     pub per_run: Vec<RunResult>,
-}
-
-fn pct(v: &mut [f64], p: f64) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v.get(((v.len().saturating_sub(1)) as f64 * p).round() as usize)
-        .copied()
-        .unwrap_or(f64::NAN)
 }
 
 /// Run `ground-sim descent`.
@@ -150,7 +143,7 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         (0..a.runs)
             .into_par_iter()
             .map_init(
-                || new_workspace(a.budget),
+                || new_workspace(a.budget.budget),
                 |ws, i| {
                     let mut rng = rand_pcg::Pcg64::seed_from_u64(
                         a.seed.wrapping_mul(0x2545_F491_4F6C_DD1D) ^ (i as u64 + 1),
@@ -196,9 +189,9 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
     let summary = DescentSummary {
         runs: per_run.len(),
         seed: a.seed,
-        budget: a.budget.label(),
-        landing_err_p50_m: pct(&mut land.clone(), 0.5),
-        landing_err_p95_m: pct(&mut land.clone(), 0.95),
+        budget: a.budget.budget.label(),
+        landing_err_p50_m: percentile(&mut land.clone(), 0.5),
+        landing_err_p95_m: percentile(&mut land.clone(), 0.95),
         landing_err_max_m: land.iter().copied().fold(0.0, f64::max),
         nav_err_rms_m: (sq / samples.max(1) as f64).sqrt(),
         fixes: per_run.iter().map(|r| r.fixes).sum(),

@@ -8,17 +8,12 @@ use ground_sim::dem::read_geotiff;
 use ground_sim::evaluation::campaign::{
     CampaignSpec, PriorSpec, print_summary, run_campaign, summarize, write_csv,
 };
-use ground_sim::flyer::onboard::Budget;
 use ground_sim::reference::load;
 use nav_core::{NavConfig, Tile};
 
 /// Arguments of `ground-sim eval`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// Navigator budget: `flight` (the firmware's, what flies) or `host` (bigger than what
-    /// flies; labelled in every output).
-    #[arg(long, value_enum, default_value_t = Budget::Flight)]
-    pub budget: Budget,
     /// Reference folder (tile.bin, slope.tif).
     #[arg(long)]
     pub tile: PathBuf,
@@ -49,6 +44,9 @@ pub struct Args {
     /// One CSV row per trial (default: next to the JSON, `.csv`).
     #[arg(long)]
     pub csv: Option<PathBuf>,
+    /// The navigator budget.
+    #[command(flatten)]
+    pub budget: super::BudgetArgs,
 }
 
 /// The prior of a campaign on the command line: none unless `--prior-sigma-m` is given.
@@ -99,7 +97,7 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         pixel_max_m: a.pixel_max_m,
         sensor: a.sensor.model(),
         prior: a.prior.spec()?,
-        budget: a.budget,
+        budget: a.budget.budget,
     };
     let pb = super::progress(a.trials as u64, "eval");
     let rows = run_campaign(tile, NavConfig::default(), &dem, &spec, &pb)?;

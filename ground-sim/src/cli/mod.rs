@@ -16,10 +16,8 @@ pub mod terrain;
 pub mod tile;
 pub mod trn;
 
-use std::path::Path;
 use std::time::Duration;
 
-use anyhow::Context;
 use indicatif::{ProgressBar, ProgressStyle};
 
 /// A progress bar on stderr for a step of `len` units (hidden when stderr is not a terminal).
@@ -35,23 +33,7 @@ pub fn progress(len: u64, what: &str) -> ProgressBar {
     pb
 }
 
-/// Write `value` as pretty JSON to `path`, creating parent folders.
-pub fn write_json<T: serde::Serialize>(path: &Path, value: &T) -> anyhow::Result<()> {
-    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    }
-    let text = serde_json::to_string_pretty(value)?;
-    std::fs::write(path, text + "\n").with_context(|| format!("writing {}", path.display()))?;
-    Ok(())
-}
-
-/// Create the parent folder of an output file.
-pub fn ensure_parent(path: &Path) -> anyhow::Result<()> {
-    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    }
-    Ok(())
-}
+pub use ground_sim::{ensure_parent, write_json};
 
 /// Print DEM statistics as a two-column table.
 pub fn print_stats(title: &str, s: &ground_sim::dem::stats::DemStats) {
@@ -115,6 +97,15 @@ pub fn print_stats(title: &str, s: &ground_sim::dem::stats::DemStats) {
     for (k, v) in rows {
         println!("  {k:<24} {v}");
     }
+}
+
+/// The navigator budget as `trn`, `eval`, `descent` and `suite` take it on the command line.
+#[derive(Debug, Clone, clap::Args)]
+pub struct BudgetArgs {
+    /// Navigator budget: `flight` (the firmware's, what flies) or `host` (bigger than what
+    /// flies; labelled in every output).
+    #[arg(long, value_enum, default_value_t = ground_sim::flyer::onboard::Budget::Flight)]
+    pub budget: ground_sim::flyer::onboard::Budget,
 }
 
 /// The flyer's ranging sensor as `trn` and `eval` take it on the command line.

@@ -102,8 +102,8 @@ fn suite_section(
     std::fs::create_dir_all(&a.img)?;
     std::fs::copy(dir.join("suite.png"), a.img.join("suite.png"))?;
     std::fs::copy(
-        dir.join("fresh-rim").join("navmap-insar.png"),
-        a.img.join("navmap-fresh-rim-insar.png"),
+        dir.join("plains").join("navmap-truth.png"),
+        a.img.join("navmap-plains-truth.png"),
     )?;
     let img = |f: &str| {
         let rel = a.out.parent().and_then(|p| a.img.strip_prefix(p).ok());
@@ -142,8 +142,8 @@ fn suite_section(
     }
     writeln!(
         md,
-        "\nThe navigability map of the fresh crater's rim against its InSAR tile (green go, red no-go):\n\n![navmap]({})\n",
-        img("navmap-fresh-rim-insar.png")
+        "\nThe navigability map of the plains against their truth-built tile (green go, red no-go; grey: a frame centred there would leave the map):\n\n![navmap]({})\n",
+        img("navmap-plains-truth.png")
     )?;
     Ok(())
 }
@@ -270,7 +270,7 @@ pub fn run(a: &Args, dispatch: &dyn Fn(&[String]) -> anyhow::Result<()>) -> anyh
          from the truth DEM at 20 m with the default 40 m terrain smoothing (`ground-sim tile`, a perfect InSAR; the flyer smooths its frames alike), \
          except in the section on the InSAR reference, whose tiles come out of the simulated radar (`ground-sim insar`); frames are synthesised from the truth DEM at \
          10 m with 0.5 m range noise and 0.5 % dropouts (`ground-sim trn`). \
-         The onboard chain is the flight code's defaults: SURF, matching and MSAC give the feature fix, which is then refined over the frame's pixels \
+         The onboard chain is the flight code's defaults with the firmware's budget (`nav_core::flight`: 16 keypoints, 128 matches; every campaign below flies it): SURF, matching and MSAC give the feature fix, which is then refined over the frame's pixels \
          against the tile's slope raster and refused where that slope correlation contradicts it (`nav_core::refine`, docs/registration.md).\n",
         a.seed, a.trials, a.runs
     )?;

@@ -12,16 +12,11 @@ use ground_sim::evaluation::suite::{
     SHARED_DATA_DIR, SuiteReport, SuiteSpec, TileKind, default_scenes, run_scene, suite_picture,
     table_markdown,
 };
-use ground_sim::flyer::onboard::Budget;
 use ground_sim::sar::cli::RadarArgs;
 
 /// Arguments of `ground-sim suite`.
 #[derive(Debug, Clone, clap::Args)]
 pub struct Args {
-    /// Navigator budget: `flight` (the firmware's, what flies) or `host` (bigger than what
-    /// flies; labelled in every output).
-    #[arg(long, value_enum, default_value_t = Budget::Flight)]
-    pub budget: Budget,
     /// Output folder: one sub-folder per scene (DEM, tiles, campaign CSV/JSON, navmaps) and
     /// `suite.json`, `suite.md`, `suite.png`.
     #[arg(long, default_value = "out/suite")]
@@ -62,6 +57,9 @@ pub struct Args {
     /// Radar of the InSAR tiles (as `insar`: noise off unless `--nesz-db`).
     #[command(flatten)]
     pub radar: RadarArgs,
+    /// The navigator budget.
+    #[command(flatten)]
+    pub budget: super::BudgetArgs,
 }
 
 /// Run `ground-sim suite`.
@@ -105,6 +103,7 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         height_px: size_px,
         ..Default::default()
     };
+    let (radar, polarisation) = super::insar::radar_config(&a.radar)?;
     let spec = SuiteSpec {
         trials,
         seed: a.campaign_seed,
@@ -113,9 +112,10 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         kinds: a.kinds.clone(),
         priors,
         reference_pixel_m: 20.0,
-        radar: super::insar::radar_config(&a.radar)?,
+        radar,
+        polarisation,
         navmap: NavmapThresholds::default(),
-        budget: a.budget,
+        budget: a.budget.budget,
     };
     let n_campaigns = scenes.len() * spec.kinds.len() * spec.priors.len();
     let pb = super::progress(n_campaigns as u64, "suite");

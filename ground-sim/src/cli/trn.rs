@@ -6,17 +6,12 @@ use anyhow::{Context, anyhow};
 use ground_sim::dem::read_geotiff;
 use ground_sim::evaluation::trn::check_frame;
 use ground_sim::flyer::frames::FramePose;
-use ground_sim::flyer::onboard::Budget;
 use ground_sim::reference::load;
 use nav_core::Tile;
 
 /// Arguments of `ground-sim trn`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// Navigator budget: `flight` (the firmware's, what flies) or `host` (bigger than what
-    /// flies; labelled in every output).
-    #[arg(long, value_enum, default_value_t = Budget::Flight)]
-    pub budget: Budget,
     /// Reference folder (tile.bin, slope.tif) from `ground-sim tile` or `ground-sim insar`.
     #[arg(long)]
     pub tile: PathBuf,
@@ -51,6 +46,9 @@ pub struct Args {
     /// frame → reference affine (`truth.json`) into this folder, for other registration tools.
     #[arg(long)]
     pub export: Option<PathBuf>,
+    /// The navigator budget.
+    #[command(flatten)]
+    pub budget: super::BudgetArgs,
 }
 
 /// Run `ground-sim trn`.
@@ -70,7 +68,7 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         pixel_m: a.pixel_m,
     };
     let sensor = a.sensor.model();
-    let check = check_frame(&dem, &tile, &pose, &sensor, a.seed, a.budget)?;
+    let check = check_frame(&dem, &tile, &pose, &sensor, a.seed, a.budget.budget)?;
     let (frame, run, s) = (&check.frame, &check.run, &check.score);
     println!(
         "frame      {}x{} px at {} m, heading {:.1}°, centre ({:.1}, {:.1}) m",

@@ -16,7 +16,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::dem::Dem;
-use crate::evaluation::trn::{TrnScore, score};
+use crate::evaluation::trn::{TrnScore, expected_rotation_rad, score};
 use crate::flyer::frames::{FramePose, SensorModel, centre_extent, frame_reach_m, synth_frame};
 use crate::flyer::onboard::{Budget, FrameInput, WORKSPACE_STACK, new_workspace, run_frame};
 
@@ -58,16 +58,6 @@ fn normal(rng: &mut impl RngExt) -> f64 {
     (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
 }
 
-/// The rotation a perfect fix reports for a frame at `heading_rad` (clockwise from east): the
-/// heading itself in a north-up tile (pixel y pointing south), its negative otherwise.
-pub fn expected_rotation_rad(tile: &Tile<'_>, heading_rad: f64) -> f64 {
-    if tile.header().pixel_y_m < 0.0 {
-        heading_rad
-    } else {
-        -heading_rad
-    }
-}
-
 /// A prior around the truth `pose` with `spec`'s errors, in the tile's pixel axes.
 pub fn prior_around(
     tile: &Tile<'_>,
@@ -86,9 +76,10 @@ pub fn prior_around(
             ((pose.y_m + ey - h.origin_y_m) / h.pixel_y_m) as f32,
         ],
         sigma_px: (spec.sigma_m / h.pixel_m()) as f32,
-        heading_rad: expected_rotation_rad(tile, pose.heading_rad + dh) as f32,
+        heading_rad: expected_rotation_rad(h, pose.heading_rad + dh) as f32,
         heading_sigma_rad: spec.heading_sigma_deg.to_radians() as f32,
         scale: (scale * (1.0 + ds)) as f32,
+        // The navigator's scale gate divides by it: at least 0.1 %.
         scale_sigma: spec.scale_sigma.max(1e-3) as f32,
     }
 }
@@ -362,9 +353,7 @@ pub fn print_summary(s: &EvalSummary) {
 
 /// Write one CSV row per trial.
 pub fn write_csv(path: &Path, rows: &[TrnScore]) -> anyhow::Result<()> {
-    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    }
+    crate::ensure_parent(path)?;
     let mut csv = std::io::BufWriter::new(
         std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?,
     );

@@ -13,7 +13,9 @@ use nav_core::{NavConfig, Tile};
 use serde::Serialize;
 
 use crate::dem::{Dem, Interpolation, read_geotiff, resample_to_pixel, write_geotiff};
-use crate::evaluation::campaign::{CampaignSpec, EvalSummary, PriorSpec, run_campaign, summarize};
+use crate::evaluation::campaign::{
+    CampaignSpec, EvalSummary, PriorSpec, percentile, run_campaign, summarize, write_csv,
+};
 use crate::evaluation::navmap::{NavMap, NavmapScore, NavmapThresholds};
 use crate::flyer::frames::SensorModel;
 use crate::flyer::onboard::Budget;
@@ -53,7 +55,8 @@ pub struct Scene {
     pub source: SceneSource,
 }
 
-/// Real DEMs that join the suite, relative to the repository root, with why they can or cannot.
+/// Where the real DEMs that may join the suite live, relative to the repository root (the
+/// working directory the commands are run from).
 pub const SHARED_DATA_DIR: &str = "../shared/data";
 
 /// The suite's scenes at `size_m` × `size_m` and 5 m, terrain seed `seed`. `shared` is the
@@ -178,8 +181,9 @@ pub struct SuiteSpec {
     /// Reference pixel, metres.
     pub reference_pixel_m: f64,
     /// Radar of the InSAR tiles.
-    #[serde(skip)]
-    pub radar: (SarConfig, Polarisation),
+    pub radar: SarConfig,
+    /// Its InSAR channel.
+    pub polarisation: Polarisation,
     /// Navigability-map thresholds.
     pub navmap: NavmapThresholds,
     /// Navigator budget (flight unless asked otherwise).
@@ -265,10 +269,14 @@ pub fn run_scene(
     progress.set_message(format!("{}: terrain", scene.name));
     let dem = scene_dem(scene)?;
     write_geotiff(&dem, &dir.join("dem.tif"), None)?;
-    let stats = crate::dem::stats::dem_stats(&dem)?;
+    let mut slope: Vec<f64> = crate::dem::stats::slope_deg(&dem)?
+        .into_iter()
+        .filter(|v| v.is_finite())
+        .map(f64::from)
+        .collect();
     let mut report = SceneReport {
         scene: scene.clone(),
-        slope_p50_deg: stats.slope_p50_deg,
+        slope_p50_deg: percentile(&mut slope, 0.5),
         insar_height_rmse_m: None,
         insar_slope_rmse_deg: None,
         insar_valid_frac: None,
@@ -291,12 +299,11 @@ pub fn run_scene(
                 .features
             }
             TileKind::Insar => {
-                let (sar, pol) = &spec.radar;
                 let cfg = InsarConfig {
                     pixel_m: spec.reference_pixel_m,
                     ..InsarConfig::default()
                 };
-                let run = run_from_dem(&dem, sar, *pol, &cfg, false)?;
+                let run = run_from_dem(&dem, &spec.radar, spec.polarisation, &cfg, false)?;
                 let ctx = RunContext {
                     sar: Some(SarSummary::of(&run.pair)),
                     input_dem: Some(dir.join("dem.tif")),
@@ -311,6 +318,7 @@ pub fn run_scene(
         };
         let reference = crate::reference::load(&tdir)?;
         let tile = Tile::parse(&reference.tile_bytes).map_err(|e| anyhow!("{e}"))?;
+        // The disk every frame covers whatever its heading: half the side of the smallest frame.
         let radius_m =
             0.5 * spec.sensor.width_px.min(spec.sensor.height_px) as f64 * spec.pixel_range_m[0];
         let navmap = NavMap::build(&tile, radius_m, spec.navmap)?;
@@ -339,8 +347,8 @@ pub fn run_scene(
                 &ProgressBar::hidden(),
             )?;
             let summary = summarize(&scores, &cspec);
-            crate::evaluation::campaign::write_csv(&dir.join(format!("{tag}.csv")), &scores)?;
-            write_json(&dir.join(format!("{tag}.json")), &summary)?;
+            write_csv(&dir.join(format!("{tag}.csv")), &scores)?;
+            crate::write_json(&dir.join(format!("{tag}.json")), &summary)?;
             let h = tile.header();
             let mut nm = NavmapScore::default();
             // Per frame: what the map read at the true centre, what it predicted, what happened.
@@ -375,16 +383,11 @@ pub fn run_scene(
     Ok((report, rows))
 }
 
-/// `none` or `p50m-2deg`: the prior's file tag.
+/// `noprior` or `prior50m2deg`: the prior's file tag.
 pub fn prior_tag(p: Option<&PriorSpec>) -> String {
     p.map_or("noprior".into(), |p| {
         format!("prior{}m{}deg", p.sigma_m, p.heading_sigma_deg)
     })
-}
-
-fn write_json<T: Serialize>(path: &Path, v: &T) -> anyhow::Result<()> {
-    std::fs::write(path, serde_json::to_string_pretty(v)? + "\n")
-        .with_context(|| format!("writing {}", path.display()))
 }
 
 /// Write the navigability map's layers as GeoTIFFs on the tile's grid (`<stem>.tif`: 1 go,

@@ -76,6 +76,17 @@ pub struct TrnScore {
     pub truth: Option<FramePose>,
 }
 
+/// The rotation (radians) a perfect fix reports for a frame whose +x axis points `heading_rad`
+/// clockwise from east: the heading itself in a north-up tile (pixel y pointing south, the
+/// frame heading's own axes), its negative otherwise.
+pub fn expected_rotation_rad(h: &TileHeader<'_>, heading_rad: f64) -> f64 {
+    if h.pixel_y_m < 0.0 {
+        heading_rad
+    } else {
+        -heading_rad
+    }
+}
+
 /// Wrap degrees to (−180, 180].
 pub fn wrap_deg(d: f64) -> f64 {
     let r = d.rem_euclid(360.0);
@@ -129,12 +140,7 @@ fn fill_fix(
     run: &FrameRun,
 ) {
     let rot = f.similarity.rotation_rad.to_degrees();
-    // A north-up tile (pixel_y < 0) has pixel axes east/south, the frame heading's own axes.
-    let expect = if h.pixel_y_m < 0.0 {
-        pose.heading_rad.to_degrees()
-    } else {
-        -pose.heading_rad.to_degrees()
-    };
+    let expect = expected_rotation_rad(h, pose.heading_rad).to_degrees();
     s.rotation_deg = Some(rot);
     s.heading_err_deg = Some(wrap_deg(rot - expect));
     s.scale = Some(f.similarity.scale);
@@ -147,9 +153,8 @@ fn fill_fix(
     let (tr, det) = (c[0][0] + c[1][1], c[0][0] * c[1][1] - c[0][1] * c[1][0]);
     let big = 0.5 * tr + (0.25 * tr * tr - det).max(0.0).sqrt();
     s.center_sigma_m = Some(big.max(0.0).sqrt());
-    let (gx, gy) = h.pixel_to_geo(f.center_tile_px[0], f.center_tile_px[1]);
-    let (tgx, tgy) = pose.frame_to_geo((w as f64 - 1.0) / 2.0, (hh as f64 - 1.0) / 2.0, w, hh);
-    let (ex, ey) = (gx - tgx, gy - tgy);
+    // The pose is the frame centre's true geo position.
+    let (ex, ey) = (f.center_geo_m[0] - pose.x_m, f.center_geo_m[1] - pose.y_m);
     // eᵀ C⁻¹ e with the 2 × 2 inverse written out; a singular covariance gives no figure.
     s.nees = (det > 0.0)
         .then(|| (c[1][1] * ex * ex - (c[0][1] + c[1][0]) * ex * ey + c[0][0] * ey * ey) / det);
