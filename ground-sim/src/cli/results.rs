@@ -86,17 +86,20 @@ fn suite_section(
         a.seed.to_string(),
         a.suite_trials.to_string(),
     );
-    go(&[
-        "suite",
-        "--out",
-        &d,
-        "--campaign-seed",
-        &seed,
-        "--terrain-seed",
-        &seed,
-        "--trials",
-        &trials,
-    ])?;
+    let run_suite = |d: &str, seed: &str| {
+        go(&[
+            "suite",
+            "--out",
+            d,
+            "--campaign-seed",
+            seed,
+            "--terrain-seed",
+            seed,
+            "--trials",
+            &trials,
+        ])
+    };
+    run_suite(&d, &seed)?;
     let table = std::fs::read_to_string(dir.join("suite.md"))?;
     let report = read(&dir.join("suite.json"))?;
     std::fs::create_dir_all(&a.img)?;
@@ -145,6 +148,82 @@ fn suite_section(
         "\nThe navigability map of the plains against their truth-built tile (green go, red no-go; grey: a frame centred there would leave the map):\n\n![navmap]({})\n",
         img("navmap-plains-truth.png")
     )?;
+    // The same suite on other terrain and frames: nothing above may hold for one seed only.
+    let seed2 = (a.seed + 1).to_string();
+    let dir2 = a.work.join(format!("suite-seed{seed2}"));
+    run_suite(&dir2.to_string_lossy(), &seed2)?;
+    let report2 = read(&dir2.join("suite.json"))?;
+    writeln!(
+        md,
+        "### The same suite with terrain and campaign seed {seed2}\n\nSuccess per scene (false fixes in brackets when any), {trials} frames per campaign:\n"
+    )?;
+    let cols: Vec<(&str, bool)> = vec![
+        ("truth", false),
+        ("truth", true),
+        ("insar", false),
+        ("insar", true),
+    ];
+    writeln!(
+        md,
+        "| scene | truth, no prior | truth, prior | InSAR, no prior | InSAR, prior |\n|---|---|---|---|---|"
+    )?;
+    let rows = report2["rows"].as_array().cloned().unwrap_or_default();
+    for sc in report2["scenes"].as_array().into_iter().flatten() {
+        let name = sc["scene"]["name"].as_str().unwrap_or("?");
+        let cells: Vec<String> = cols
+            .iter()
+            .map(|&(kind, prior)| {
+                rows.iter()
+                    .find(|r| {
+                        r["scene"] == name
+                            && r["kind"] == kind
+                            && r["summary"]["prior"].is_null() != prior
+                    })
+                    .map_or("–".into(), |r| {
+                        let f = r["summary"]["false_fixes"].as_u64().unwrap_or(0);
+                        format!(
+                            "{:.1} %{}",
+                            100.0 * r["summary"]["success_rate"].as_f64().unwrap_or(f64::NAN),
+                            if f > 0 {
+                                format!(" ({f} false)")
+                            } else {
+                                String::new()
+                            }
+                        )
+                    })
+            })
+            .collect();
+        writeln!(md, "| {name} | {} |", cells.join(" | "))?;
+    }
+    writeln!(
+        md,
+        "\nThe navigability map over all campaigns of each seed (frames called \"go\": how many, how many got a correct fix; agreement = outcomes predicted right):\n\n| seed | tile | go frames | go success | agreement |\n|---|---|---|---|---|"
+    )?;
+    for (sd, rep) in [(&seed, &report), (&seed2, &report2)] {
+        for kind in ["truth", "insar"] {
+            let (mut go_n, mut go_ok, mut right, mut n) = (0u64, 0u64, 0u64, 0u64);
+            for r in rep["rows"]
+                .as_array()
+                .into_iter()
+                .flatten()
+                .filter(|r| r["kind"] == kind)
+            {
+                let m = &r["navmap"];
+                let g = |k: &str| m[k].as_u64().unwrap_or(0);
+                go_n += g("go_frames");
+                go_ok += g("go_success");
+                right += g("go_success") + g("nogo_frames") - g("nogo_success");
+                n += g("go_frames") + g("nogo_frames");
+            }
+            writeln!(
+                md,
+                "| {sd} | {kind} | {go_n} | {:.1} % | {:.1} % |",
+                100.0 * go_ok as f64 / go_n.max(1) as f64,
+                100.0 * right as f64 / n.max(1) as f64
+            )?;
+        }
+    }
+    writeln!(md)?;
     Ok(())
 }
 
