@@ -26,6 +26,7 @@ pub fn frame_result(frame_id: u32, r: &Result<FrameReport, NavError>) -> FrameRe
                     inliers: f.inliers,
                     residual_rms_px: f.residual_rms_px,
                     refined: f.refined,
+                    area_search: f.area_search,
                 }),
                 Err(n) => WireOutcome::NoFix(no_fix(*n)),
             },

@@ -56,7 +56,7 @@ pub mod target;
 pub mod host;
 
 /// Protocol version exchanged in the hello handshake; bumped on any incompatible change.
-pub const PROTOCOL_VERSION: u16 = 2;
+pub const PROTOCOL_VERSION: u16 = 3;
 
 pub use msg::Message;
 pub use packet::{PacketError, Received, Receiver, decode_packet, encode_packet, encode_wire};

@@ -213,6 +213,8 @@ pub struct WireFix {
     pub residual_rms_px: f64,
     /// The transform comes from the dense refinement over the frame's pixels.
     pub refined: bool,
+    /// The fix comes from the prior-aided area search, not from feature matches.
+    pub area_search: bool,
 }
 
 /// Why there is no fix (mirrors `nav_core::NoFix`).

@@ -85,7 +85,7 @@ fn golden() -> Vec<(u16, Message<'static>, &'static str)> {
 #[test]
 fn golden_vectors_encode_and_decode() {
     assert_eq!(
-        PROTOCOL_VERSION, 2,
+        PROTOCOL_VERSION, 3,
         "a version bump needs new golden vectors"
     );
     for (seq, msg, bytes) in golden() {
@@ -118,6 +118,7 @@ fn sample_fix() -> WireFix {
         inliers: 12,
         residual_rms_px: 0.73,
         refined: true,
+        area_search: false,
     }
 }
 

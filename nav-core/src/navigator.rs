@@ -6,6 +6,7 @@ use crate::matching::{Match, MatchConfig, MatchStats, match_features};
 use crate::msac::{Affine, Correspondence, MsacConfig, msac};
 use crate::pose::{Fix, GateConfig, NoFix, make_fix};
 use crate::refine::{RefineConfig, RefineError, Refined, refine};
+use crate::search::{SearchConfig, SearchError, SearchHit, search};
 use crate::surf::{Features, SurfConfig, SurfError, SurfWorkspace, extract};
 use crate::tile::Tile;
 use core::fmt;
@@ -69,6 +70,8 @@ pub struct NavConfig {
     pub match_tile_smoothing: bool,
     /// Dense refinement of every fix against the tile's slope raster (when it carries one).
     pub refine: RefineConfig,
+    /// Prior-aided area search when the feature path gives no fix ([`crate::search`]).
+    pub search: SearchConfig,
 }
 
 impl Default for NavConfig {
@@ -85,6 +88,7 @@ impl Default for NavConfig {
             bin_to_tile: true,
             match_tile_smoothing: true,
             refine: RefineConfig::default(),
+            search: SearchConfig::default(),
         }
     }
 }
@@ -148,6 +152,10 @@ pub struct FrameReport {
     /// inliers but at least [`GateConfig::min_inliers_verified`], or clustered inliers): the
     /// fix stood only if the refinement confirmed it.
     pub needed_confirmation: bool,
+    /// The prior-aided area search: `None` when it did not run (a feature fix, no prior, or
+    /// search disabled), otherwise its best alignment or why it found none. Its fix, if any,
+    /// is the outcome (with [`Fix::area_search`] set).
+    pub search: Option<Result<SearchHit, SearchError>>,
 }
 
 /// Caller-owned working memory for one frame: slope buffer, SURF scratch, up to `MAX_KP` frame
@@ -304,14 +312,10 @@ impl<'t> Navigator<'t> {
         extract(&img, &cfg, surf.scratch(), features)?;
         features.unbin(k);
         let mut report = self.locate_features(ws, dem.width(), dem.height(), prior);
-        self.refine_fix(
-            &mut report,
-            &ws.slope.image()?,
-            k,
-            dem.width(),
-            dem.height(),
-        );
+        let img = ws.slope.image()?;
+        self.refine_fix(&mut report, &img, k, dem.width(), dem.height());
         self.prior_gate(&mut report, prior);
+        self.area_search(&mut report, &img, k, dem.width(), dem.height(), prior);
         Ok(report)
     }
 
@@ -333,18 +337,16 @@ impl<'t> Navigator<'t> {
             extract(img, &cfg, ws.surf.scratch(), &mut ws.features)?;
         }
         let mut report = self.locate_features(ws, img.width(), img.height(), prior);
-        if k > 1 {
-            self.refine_fix(
-                &mut report,
-                &ws.slope.image()?,
-                k,
-                img.width(),
-                img.height(),
-            );
+        let binned;
+        let used = if k > 1 {
+            binned = ws.slope.image()?;
+            &binned
         } else {
-            self.refine_fix(&mut report, img, 1, img.width(), img.height());
-        }
+            img
+        };
+        self.refine_fix(&mut report, used, k, img.width(), img.height());
         self.prior_gate(&mut report, prior);
+        self.area_search(&mut report, used, k, img.width(), img.height(), prior);
         Ok(report)
     }
 
@@ -380,6 +382,57 @@ impl<'t> Navigator<'t> {
             report.outcome = Err(NoFix::Unconfirmed);
         }
         report.refine = Some(result);
+    }
+
+    /// With a prior and no fix, search the prior's window by slope correlation; a hit the
+    /// refinement confirms (converged, correlation ≥ the gate's `verify_min_ncc`) and the prior
+    /// gate accepts becomes the fix, with the refinement's covariance.
+    fn area_search(
+        &self,
+        report: &mut FrameReport,
+        img: &SlopeImage<'_>,
+        k: usize,
+        frame_w: usize,
+        frame_h: usize,
+        prior: Option<&Prior>,
+    ) {
+        let Some(p) = prior else { return };
+        // After a refused feature fix that was refined, the frame has spent the refinement's
+        // share of the instruction budget, and a fix the slope correlation contradicted is no
+        // case for another correlation: the search runs only where features were too few or
+        // found no consensus.
+        if report.outcome.is_ok() || report.refine.is_some() || !self.cfg.search.enabled {
+            return;
+        }
+        let Some(raster) = self.tile.slope_raster() else {
+            report.search = Some(Err(SearchError::NoRaster));
+            return;
+        };
+        let hit = search(img, k, raster, p, &self.cfg.search);
+        report.search = Some(hit);
+        let Ok(hit) = hit else { return };
+        let rcfg = RefineConfig {
+            max_samples: self.cfg.search.refine_max_samples,
+            max_iterations: self.cfg.search.refine_max_iterations,
+            ..self.cfg.refine
+        };
+        let r = match refine(img, k, raster, &hit.affine, &rcfg) {
+            Ok(r) if r.ncc_after >= self.cfg.gate.verify_min_ncc => r,
+            _ => return,
+        };
+        let fix = Fix::from_area_search(&r, self.tile.header(), frame_w, frame_h);
+        let sim = fix.similarity;
+        let gate = &self.cfg.gate;
+        if !(sim.scale >= gate.scale_min as f64 && sim.scale <= gate.scale_max as f64) {
+            return;
+        }
+        let saved = core::mem::replace(&mut report.outcome, Ok(fix));
+        self.prior_gate(report, prior);
+        if report.outcome.is_ok() {
+            report.refine = Some(Ok(r));
+        } else {
+            report.outcome = saved;
+        }
     }
 
     /// Refuse a fix farther from the prior than its gate allows.
@@ -492,6 +545,7 @@ impl<'t> Navigator<'t> {
             detect_stats: ws.features.stats,
             refine: None,
             needed_confirmation: false,
+            search: None,
         };
         ws.matches.clear();
         if feats.len() < self.cfg.gate.min_matches as usize {

@@ -168,6 +168,10 @@ pub struct Fix {
     /// the one that measured consistent in closed loop (the refinement's own statistical
     /// covariance is in [`crate::refine::Refined`]; see `docs/registration.md`).
     pub refined: bool,
+    /// The fix comes from the prior-aided area search ([`crate::search`]) and its refinement,
+    /// not from feature matches: `inliers` and `residual_rms_px` are 0, and the covariances
+    /// are the refinement's own ([`crate::refine::Refined::center_cov_tile_px2`]).
+    pub area_search: bool,
 }
 
 impl Fix {
@@ -202,6 +206,53 @@ impl Fix {
             heading_rad: heading,
             refined: true,
             ..*self
+        }
+    }
+}
+
+impl Fix {
+    /// A fix from a refined area-search alignment: transform, position and heading from the
+    /// refinement, covariances from its Gauss–Newton model.
+    pub fn from_area_search(
+        r: &crate::refine::Refined,
+        header: &TileHeader<'_>,
+        frame_w: usize,
+        frame_h: usize,
+    ) -> Self {
+        let sim = similarity(&r.affine);
+        let (cx, cy) = ((frame_w as f64 - 1.0) * 0.5, (frame_h as f64 - 1.0) * 0.5);
+        let (tx, ty) = r.affine.apply(cx, cy);
+        let (gx, gy) = header.pixel_to_geo(tx, ty);
+        let (ax, ay) = (libm::fabs(header.pixel_x_m), libm::fabs(header.pixel_y_m));
+        let c = r.center_cov_tile_px2;
+        let mut heading = sim.rotation_rad;
+        if heading < 0.0 {
+            heading += core::f64::consts::TAU;
+        }
+        Self {
+            affine: r.affine,
+            similarity: sim,
+            center_tile_px: [tx, ty],
+            center_geo_m: [gx, gy],
+            heading_rad: heading,
+            center_cov_tile_px2: c,
+            // Geo axes are the tile axes scaled by the (signed) pixel sizes.
+            center_cov_geo_m2: [
+                [
+                    c[0][0] * ax * ax,
+                    c[0][1] * header.pixel_x_m * header.pixel_y_m,
+                ],
+                [
+                    c[1][0] * header.pixel_x_m * header.pixel_y_m,
+                    c[1][1] * ay * ay,
+                ],
+            ],
+            heading_sigma_rad: r.rotation_sigma_rad,
+            scale_sigma: r.scale_sigma,
+            inliers: 0,
+            residual_rms_px: 0.0,
+            refined: true,
+            area_search: true,
         }
     }
 }
@@ -284,5 +335,6 @@ pub fn make_fix(
         inliers: r.inliers,
         residual_rms_px: r.residual_rms_px,
         refined: false,
+        area_search: false,
     })
 }

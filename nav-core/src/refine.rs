@@ -177,7 +177,13 @@ struct Pass {
     see: f64,
     /// Σ e·e' over horizontally neighbouring valid samples.
     slag: f64,
+    /// Σ e·e' over vertically neighbouring valid samples (the first [`LAG_ROW`] of a row).
+    svlag: f64,
 }
+
+/// Samples per row whose residuals are kept for the vertical lag correlation (a row of the
+/// default 1 100-sample grid on a square frame has 34).
+pub const LAG_ROW: usize = 128;
 
 /// Index of `(i, j)`, `i ≤ j`, in a row-by-row upper triangle of a 6 × 6 matrix.
 fn tri(i: usize, j: usize) -> usize {
@@ -209,6 +215,13 @@ impl Pass {
     fn lag_correlation(&self) -> f32 {
         if self.see > 0.0 {
             ((self.slag / self.see) as f32).clamp(0.0, 0.9)
+        } else {
+            0.0
+        }
+    }
+    fn vertical_lag_correlation(&self) -> f32 {
+        if self.see > 0.0 {
+            ((self.svlag / self.see) as f32).clamp(0.0, 0.9)
         } else {
             0.0
         }
@@ -279,7 +292,11 @@ fn pass(
     let mut out = Pass::default();
     let half = st / 2;
     let mut v = 1 + half;
+    // Residuals of the previous sample row (NaN = no valid sample there).
+    let mut above = [f32::NAN; LAG_ROW];
     while v + 1 < h {
+        let mut svlag = 0.0f32;
+        let mut col = 0usize;
         let mut hr = [0.0f32; 21];
         let mut br = [0.0f32; 6];
         let (mut sf, mut sr, mut sff, mut srr, mut sfr, mut see) =
@@ -298,8 +315,13 @@ fn pass(
                 Some((f, fx, fy, x, y, r))
             })();
             u += st;
+            let slot = above.get_mut(col);
+            col += 1;
             let Some((f, fx, fy, x, y, r)) = sample else {
                 prev = None;
+                if let Some(a) = slot {
+                    *a = f32::NAN;
+                }
                 continue;
             };
             let e = r - (g * f + o);
@@ -307,6 +329,12 @@ fn pass(
                 slag += p * e;
             }
             prev = Some(e);
+            if let Some(a) = slot {
+                if a.is_finite() {
+                    svlag += *a * e;
+                }
+                *a = e;
+            }
             let ae = libm::fabsf(e);
             let wt = if ae > huber { huber / ae } else { 1.0 };
             let s = [
@@ -346,6 +374,7 @@ fn pass(
         out.sfr += sfr as f64;
         out.see += see as f64;
         out.slag += slag as f64;
+        out.svlag += svlag as f64;
         v += st;
     }
     out
@@ -464,7 +493,10 @@ pub fn refine(
         return Err(RefineError::Singular);
     };
     let rho = last.lag_correlation() as f64;
-    let inflate = (1.0 + rho) / (1.0 - rho);
+    let rho_v = last.vertical_lag_correlation() as f64;
+    // Residuals correlate along both axes of the sample grid: the effective number of
+    // independent samples shrinks by both axes' factors.
+    let inflate = (1.0 + rho) / (1.0 - rho) * (1.0 + rho_v) / (1.0 - rho_v);
     let sigma2 = last.see / (last.n as f64 - 6.0).max(1.0) * inflate;
     let cv = |i: usize, j: usize| sigma2 * inv.get((i, j)).copied().unwrap_or(f64::NAN);
     // The centre moves by −M·d: covariance M·Σ_dd·Mᵀ.

@@ -234,6 +234,15 @@ impl SlopeRaster<'_> {
     pub fn height(&self) -> usize {
         self.height
     }
+    /// Raw bits of pixel `i` in row-major order; `u16::MAX` (no data) outside. One bounds
+    /// check: the area search's inner loop reads tens of thousands of pixels per frame.
+    #[inline]
+    pub fn raw_index(&self, i: usize) -> u16 {
+        match self.bytes.get(2 * i..2 * i + 2) {
+            Some(&[a, b]) => u16::from_le_bytes([a, b]),
+            _ => u16::MAX,
+        }
+    }
     /// Pixel at `(col, row)`; [`SLOPE_NODATA`] outside.
     #[inline]
     pub fn get(&self, col: usize, row: usize) -> SlopePx {

@@ -212,6 +212,8 @@ pub struct EvalSummary {
     pub no_fix_reasons: BTreeMap<String, usize>,
     /// Fraction of fixes refined densely against the tile's slope raster.
     pub refined_frac: f64,
+    /// Fraction of fixes that came from the prior-aided area search (0 without a prior).
+    pub area_search_frac: f64,
     /// Mean of (centre error / refinement's own σ per axis)² over refined correct fixes: 2 if
     /// the refinement's statistical covariance were consistent (the fixes report the feature
     /// covariance; see docs/registration.md).
@@ -295,6 +297,8 @@ pub fn summarize(rows: &[TrnScore], spec: &CampaignSpec) -> EvalSummary {
         time_ms_mean: rows.iter().map(|r| r.time_ms).sum::<f64>() / n,
         no_fix_reasons: reasons,
         refined_frac: fixes.iter().filter(|r| r.refined).count() as f64 / fixes.len().max(1) as f64,
+        area_search_frac: fixes.iter().filter(|r| r.area_search).count() as f64
+            / fixes.len().max(1) as f64,
         refine_notes,
         refined_nees_mean: mean(&refined_nees),
         pixel_range_m: [spec.pixel_min_m, spec.pixel_max_m],
@@ -359,7 +363,7 @@ pub fn write_csv(path: &Path, rows: &[TrnScore]) -> anyhow::Result<()> {
     );
     writeln!(
         csv,
-        "trial,x_m,y_m,heading_deg,pixel_m,fix,false_fix,features,matches,inliers,rotation_deg,heading_err_deg,scale,scale_truth,pos_err_m,center_err_px,reg_err_mean_px,reg_err_max_px,center_sigma_m,nees,time_ms,refined,ncc,refined_sigma_m,refine_note,no_fix_reason"
+        "trial,x_m,y_m,heading_deg,pixel_m,fix,false_fix,features,matches,inliers,rotation_deg,heading_err_deg,scale,scale_truth,pos_err_m,center_err_px,reg_err_mean_px,reg_err_max_px,center_sigma_m,nees,time_ms,refined,ncc,refined_sigma_m,refine_note,area_search,no_fix_reason"
     )?;
     let o = |v: Option<f64>| v.map_or(String::new(), |x| format!("{x:.6}"));
     for (i, r) in rows.iter().enumerate() {
@@ -371,7 +375,7 @@ pub fn write_csv(path: &Path, rows: &[TrnScore]) -> anyhow::Result<()> {
         });
         writeln!(
             csv,
-            "{i},{:.3},{:.3},{:.4},{:.4},{},{},{},{},{},{},{},{},{:.6},{},{},{},{},{},{},{:.3},{},{},{},{},{}",
+            "{i},{:.3},{:.3},{:.4},{:.4},{},{},{},{},{},{},{},{},{:.6},{},{},{},{},{},{},{:.3},{},{},{},{},{},{}",
             t.x_m,
             t.y_m,
             t.heading_rad.to_degrees(),
@@ -396,6 +400,7 @@ pub fn write_csv(path: &Path, rows: &[TrnScore]) -> anyhow::Result<()> {
             o(r.ncc.map(f64::from)),
             o(r.refined_sigma_m),
             r.refine_note.as_deref().unwrap_or(""),
+            r.area_search,
             r.no_fix_reason.as_deref().unwrap_or("")
         )?;
     }

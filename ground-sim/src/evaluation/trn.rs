@@ -40,6 +40,8 @@ pub struct TrnScore {
     pub inliers: u16,
     /// Whether the fix was refined densely against the tile's slope raster.
     pub refined: bool,
+    /// The fix came from the prior-aided area search (`nav_core::search`), not from features.
+    pub area_search: bool,
     /// Why a fix was not refined (it then stands as the features gave it).
     pub refine_note: Option<String>,
     /// Normalised cross-correlation of frame and reference slope under the refined transform.
@@ -105,7 +107,12 @@ pub fn score(
     let scale_truth = pose.pixel_m / h.pixel_m();
     let mut s = TrnScore {
         fix: run.report.outcome.is_ok(),
-        no_fix_reason: run.report.outcome.err().map(|e| e.to_string()),
+        no_fix_reason: run.report.outcome.err().map(|e| match run.report.search {
+            // The search ran after the feature path failed: its verdict is the last word.
+            Some(Err(se)) => format!("area search: {se}"),
+            Some(Ok(_)) => "area search: not confirmed by the refinement".to_string(),
+            None => e.to_string(),
+        }),
         features: run.report.features,
         matches: run.report.matches,
         inliers: run.report.inliers,
@@ -126,6 +133,7 @@ pub fn score(
             _ => {}
         }
         s.refined = f.refined;
+        s.area_search = f.area_search;
     }
     s
 }

@@ -29,6 +29,11 @@ pub const TILE_PIXEL_M: f64 = 20.0;
 pub const FRAMES_FORMAT_VERSION: u32 = 1;
 /// Terrain seed.
 pub const TERRAIN_SEED: u64 = 8;
+/// Gentle-terrain frames (relief scaled by [`GENTLE_RELIEF`]) sent with a prior.
+pub const GENTLE_FRAMES: usize = 3;
+/// Height scale of the gentle frames: slopes become about a fifth of the tile's, below the
+/// tile's detector threshold for most blobs.
+pub const GENTLE_RELIEF: f32 = 0.2;
 
 /// What a frame shows.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -40,6 +45,12 @@ pub enum FrameKind {
     TerrainWithPrior,
     /// Terrain with no-data holes.
     TerrainHoles,
+    /// The terrain's relief scaled down (gentle plains: slopes a fifth of the tile's), with a
+    /// prior: few features, so the prior-aided area search runs.
+    GentleWithPrior,
+    /// A stress frame sent with a wide prior (σ 8 px, 6°): the area search's worst case after
+    /// a feature path that finds nothing.
+    StressWithPrior,
     /// All heights equal: no features.
     Flat,
     /// Uniform random heights: many weak, unmatchable keypoints.
@@ -215,7 +226,8 @@ fn stress(kind: FrameKind, seed: u64) -> Vec<f32> {
 }
 
 /// Generate the set: `terrain_frames` terrain frames (headings 0–345°, every sixth with a prior,
-/// one with holes) followed by the five stress frames.
+/// one with holes), [`GENTLE_FRAMES`] gentle frames with a prior, the five stress frames, and
+/// two stress frames with a prior.
 pub fn generate_set(terrain_frames: usize) -> Result<FrameSet> {
     let params = TerrainParams {
         preset: Preset::Shoemaker,
@@ -330,26 +342,87 @@ pub fn generate_set(terrain_frames: usize) -> Result<FrameSet> {
             heights_m: heights,
         });
     }
-    for (i, kind) in [
-        FrameKind::MaxKeypoints,
-        FrameKind::Noise,
-        FrameKind::Textured,
-        FrameKind::Checkerboard,
-        FrameKind::Flat,
-    ]
-    .into_iter()
-    .enumerate()
-    {
+    for k in 0..GENTLE_FRAMES {
+        let heading = (40.0 + 110.0 * k as f64).to_radians();
+        let cu = margin + rng.unit() * (TERRAIN_SIDE as f64 - 2.0 * margin);
+        let cv = margin + rng.unit() * (TERRAIN_SIDE as f64 - 2.0 * margin);
+        let mut heights = cut(z, cu, cv, heading);
+        let mean = heights.iter().map(|&h| h as f64).sum::<f64>() / heights.len() as f64;
+        for h in &mut heights {
+            *h = (mean + (*h as f64 - mean) * GENTLE_RELIEF as f64) as f32;
+        }
+        let truth = Truth {
+            center_tile_px: [(cu - 0.5) / 2.0, (cv - 0.5) / 2.0],
+            heading_rad: heading,
+            scale: FRAME_PIXEL_M as f64 / TILE_PIXEL_M,
+        };
+        // The prior of a filter in cruise: 50 m and 2° (1σ), drawn off the truth by about 1σ.
+        let prior = crate::msg::WirePrior {
+            center_tile_px: [
+                truth.center_tile_px[0] as f32 - 2.0,
+                truth.center_tile_px[1] as f32 + 1.5,
+            ],
+            sigma_px: 2.5,
+            heading_rad: heading as f32 - 0.03,
+            heading_sigma_rad: 0.035,
+            scale: 0.5,
+            scale_sigma: 0.01,
+        };
         frames.push(Frame {
             meta: FrameMeta {
                 id: frames.len() as u32,
-                name: format!("stress-{}", serde_json::to_string(&kind)?.trim_matches('"')),
-                kind,
+                name: format!(
+                    "gentle-{k:02}-{:03}deg",
+                    heading.to_degrees().round() as i64
+                ),
+                kind: FrameKind::GentleWithPrior,
+                width: FRAME_SIDE as u16,
+                height: FRAME_SIDE as u16,
+                pixel_m: FRAME_PIXEL_M,
+                truth: Some(truth),
+                prior: Some(prior),
+            },
+            heights_m: heights,
+        });
+    }
+    // The search's widest window (every cap reached) over frames where features fail.
+    let wide_prior = crate::msg::WirePrior {
+        center_tile_px: [0.5 * t as f32, 0.5 * t as f32],
+        sigma_px: 8.0,
+        heading_rad: 0.3,
+        heading_sigma_rad: 0.1,
+        scale: 0.5,
+        scale_sigma: 0.03,
+    };
+    // (kind, seed offset, prior): the prior frames reuse their plain twin's heights.
+    for (kind, i, prior) in [
+        (FrameKind::MaxKeypoints, 0, None),
+        (FrameKind::Noise, 1, None),
+        (FrameKind::Textured, 2, None),
+        (FrameKind::Checkerboard, 3, None),
+        (FrameKind::Flat, 4, None),
+        (FrameKind::Noise, 1, Some(wide_prior)),
+        (FrameKind::Textured, 2, Some(wide_prior)),
+    ] {
+        let name = format!(
+            "stress-{}{}",
+            serde_json::to_string(&kind)?.trim_matches('"'),
+            if prior.is_some() { "-prior" } else { "" }
+        );
+        frames.push(Frame {
+            meta: FrameMeta {
+                id: frames.len() as u32,
+                name,
+                kind: if prior.is_some() {
+                    FrameKind::StressWithPrior
+                } else {
+                    kind
+                },
                 width: FRAME_SIDE as u16,
                 height: FRAME_SIDE as u16,
                 pixel_m: FRAME_PIXEL_M,
                 truth: None,
-                prior: None,
+                prior,
             },
             heights_m: stress(kind, 77 + i as u64),
         });
