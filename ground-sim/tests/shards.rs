@@ -1,7 +1,8 @@
 //! Sharded campaigns: `eval` and `descent` split into N = 1, 3, 7 shards (background processes
 //! through `tools/local-shards.sh`) and merged give byte for byte the summary, CSV and pictures
-//! of the single run; `merge` refuses gaps, duplicates and shards of another campaign; `--shard`
-//! refuses malformed text.
+//! of the single run; `tools/slurm-campaign.sh`'s job scripts do the same under a stand-in
+//! `sbatch` (no Slurm here); `merge` refuses gaps, duplicates and shards of another campaign;
+//! `--shard` refuses malformed text.
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -52,6 +53,58 @@ fn local_shards(n: usize, out: &Path, cmd: &str, args: &[&str]) {
         "local-shards {n} {cmd} failed:\n{}\n{}",
         String::from_utf8_lossy(&o.stdout),
         String::from_utf8_lossy(&o.stderr)
+    );
+}
+
+/// A stand-in for Slurm's `sbatch`: runs the job script at once (array tasks in turn, with
+/// `SLURM_ARRAY_TASK_ID` set) in its `--chdir`, and prints a job id as `--parsable` does. A
+/// failing task fails the submission, which is what `afterok` makes of the merge.
+const FAKE_SBATCH: &str = r#"#!/usr/bin/env bash
+set -euo pipefail
+script=""
+for a in "$@"; do
+    case $a in -*) ;; *) script=$a ;; esac
+done
+eval "cd $(sed -n 's/^#SBATCH --chdir=//p' "$script")"
+range=$(sed -n 's/^#SBATCH --array=//p' "$script")
+if [[ -n $range ]]; then
+    for ((i = ${range%-*}; i <= ${range#*-}; i++)); do
+        SLURM_ARRAY_TASK_ID=$i SLURM_CPUS_PER_TASK=1 bash "$script" >&2
+    done
+else
+    bash "$script" >&2
+fi
+echo "$RANDOM"
+"#;
+
+/// `tools/slurm-campaign.sh N OUT CMD ARGS...` with this build's binary and [`FAKE_SBATCH`].
+fn slurm_campaign(n: usize, out: &Path, cmd: &str, args: &[&str], bin_dir: &Path) {
+    std::fs::create_dir_all(bin_dir).unwrap();
+    let sbatch = bin_dir.join("sbatch");
+    std::fs::write(&sbatch, FAKE_SBATCH).unwrap();
+    std::fs::set_permissions(&sbatch, std::os::unix::fs::PermissionsExt::from_mode(0o755)).unwrap();
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tools/slurm-campaign.sh");
+    let path = format!("{}:{}", bin_dir.display(), std::env::var("PATH").unwrap());
+    let o = Command::new("bash")
+        .arg(script)
+        .arg(n.to_string())
+        .arg(out)
+        .arg(cmd)
+        .args(args)
+        .env("GROUND_SIM", env!("CARGO_BIN_EXE_ground-sim"))
+        .env("PATH", path)
+        .output()
+        .expect("bash runs");
+    assert!(
+        o.status.success(),
+        "slurm-campaign {n} {cmd} failed:\n{}\n{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let job = std::fs::read_to_string(out.join("slurm/shard.sbatch")).unwrap();
+    assert!(
+        job.contains(&format!("#SBATCH --array=0-{}", n - 1)),
+        "{job}"
     );
 }
 
@@ -114,6 +167,11 @@ fn merged_shards_equal_the_single_run_byte_for_byte() {
         assert_same_bytes(&json, &out.join("eval.json"));
         assert_same_bytes(&single.join("eval.csv"), &out.join("eval.csv"));
     }
+    // The Slurm job scripts (a stand-in sbatch runs them here).
+    let out = dir.path().join("eval-slurm-3");
+    slurm_campaign(3, &out, "eval", &eval_args, &dir.path().join("fake-bin"));
+    assert_same_bytes(&json, &out.join("eval.json"));
+    assert_same_bytes(&single.join("eval.csv"), &out.join("eval.csv"));
     println!("eval: {:.1} s", t0.elapsed().as_secs_f64());
     // The figures are real: some frames were flown and fixed.
     let e: serde_json::Value =

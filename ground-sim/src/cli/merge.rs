@@ -26,7 +26,7 @@ pub struct Args {
 }
 
 /// Read every shard as kind `kind`, check they make one whole campaign, join them.
-fn join<S, R>(shards: &[PathBuf], kind: &str) -> anyhow::Result<(ShardFile<S, R>, Vec<(usize, R)>)>
+fn join<S, R>(shards: &[PathBuf], kind: &str) -> anyhow::Result<ShardFile<S, R>>
 where
     S: Serialize + DeserializeOwned,
     R: Serialize + DeserializeOwned,
@@ -35,14 +35,14 @@ where
         .iter()
         .map(|p| Ok((p.clone(), ShardFile::<S, R>::read(p, kind)?)))
         .collect::<anyhow::Result<Vec<_>>>()?;
-    let (meta, joined) = check_shards(files)?;
+    let whole = check_shards(files)?;
     println!(
         "merged       {} shards of a `{kind}` campaign: {} trials (seed {})",
         shards.len(),
-        meta.trials,
-        meta.seed
+        whole.trials,
+        whole.seed
     );
-    Ok((meta, joined))
+    Ok(whole)
 }
 
 /// Run `ground-sim merge`.
@@ -55,25 +55,23 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
             if a.png.is_some() {
                 bail!("--png applies to descent shards; these are eval shards");
             }
-            let (meta, joined) = join(&a.shards, super::eval::KIND)?;
-            let rows: Vec<_> = joined.into_iter().map(|(_, r)| r).collect();
+            let whole: super::eval::EvalShard = join(&a.shards, super::eval::KIND)?;
             let csv = a
                 .csv
                 .clone()
                 .unwrap_or_else(|| a.json.with_extension("csv"));
-            super::eval::report(&meta.spec, &rows, &a.json, &csv)
+            super::eval::report(&whole.spec, &whole.records, &a.json, &csv)
         }
         super::descent::KIND => {
             if a.csv.is_some() {
                 bail!("--csv applies to eval shards; these are descent shards");
             }
-            let (meta, joined) = join(&a.shards, super::descent::KIND)?;
-            let records = joined.into_iter().map(|(_, r)| r).collect();
+            let whole: super::descent::DescentShard = join(&a.shards, super::descent::KIND)?;
             let dir = a
                 .png
                 .clone()
                 .unwrap_or_else(|| a.json.parent().map(|p| p.to_path_buf()).unwrap_or_default());
-            super::descent::report(&meta.spec, records, &a.json, &dir)
+            super::descent::report(&whole.spec, whole.records, &a.json, &dir)
         }
         other => bail!(
             "{}: unknown campaign kind {other:?} (eval or descent)",

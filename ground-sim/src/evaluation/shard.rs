@@ -236,10 +236,11 @@ pub fn shard_path(path: &Path) -> PathBuf {
 }
 
 /// Check that `shards` (with the paths they came from, for messages) are all the shards of one
-/// campaign, each once, with exactly their own trials; return them joined in trial order.
+/// campaign, each once, with exactly their own trials; return them joined as the whole campaign
+/// (shard 0/1, every trial's record in trial order).
 pub fn check_shards<S: Serialize, R>(
     shards: Vec<(PathBuf, ShardFile<S, R>)>,
-) -> anyhow::Result<(ShardFile<S, R>, Vec<(usize, R)>)> {
+) -> anyhow::Result<ShardFile<S, R>> {
     let Some((first_path, first)) = shards.first() else {
         bail!("merge needs at least one shard");
     };
@@ -315,16 +316,15 @@ pub fn check_shards<S: Serialize, R>(
         }
     }
     // Every shard holds exactly its residue class and all N are present: every slot is full.
-    let joined = slots
+    let records = slots
         .into_iter()
-        .enumerate()
-        .map(|(k, r)| r.map(|r| (k, r)))
         .collect::<Option<Vec<_>>>()
         .context("a trial is missing after the checks (bug)")?;
-    let mut meta = meta.context("shard 0 missing after the checks (bug)")?;
-    meta.shard = Shard::WHOLE;
-    meta.trial_indices = (0..total).collect();
-    Ok((meta, joined))
+    let mut whole = meta.context("shard 0 missing after the checks (bug)")?;
+    whole.shard = Shard::WHOLE;
+    whole.trial_indices = (0..total).collect();
+    whole.records = records;
+    Ok(whole)
 }
 
 /// The top-level fields in which two identities differ, for an error message.
