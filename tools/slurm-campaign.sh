@@ -48,6 +48,13 @@ cpus=${CPUS_PER_TASK:-4}
 mkdir -p "$out/shards" "$out/slurm"
 out=$(cd "$out" && pwd)
 read -r -a extra <<<"${SBATCH_ARGS:-}"
+# #SBATCH lines take a path as it stands, without shell quoting.
+for p in "$out" "$PWD"; do
+    if [[ $p =~ [[:space:]] ]]; then
+        echo "slurm-campaign: '$p' has whitespace, which #SBATCH --chdir/--output cannot carry" >&2
+        exit 2
+    fi
+done
 
 # The command's arguments, quoted once for the job scripts.
 args=$(printf '%q ' "$@")
@@ -59,8 +66,8 @@ cat >"$out/slurm/shard.sbatch" <<JOB
 #SBATCH --array=0-$((n - 1))
 #SBATCH --ntasks=1
 #SBATCH --cpus-per-task=$cpus
-#SBATCH --chdir=$(q "$PWD")
-#SBATCH --output=$(q "$out")/shards/shard-%a.log
+#SBATCH --chdir=$PWD
+#SBATCH --output=$out/shards/shard-%a.log
 set -euo pipefail
 export RAYON_NUM_THREADS=\${SLURM_CPUS_PER_TASK:-$cpus}
 i=\$SLURM_ARRAY_TASK_ID
@@ -74,8 +81,8 @@ cat >"$out/slurm/merge.sbatch" <<JOB
 #SBATCH --job-name=umbra-$cmd-merge
 #SBATCH --ntasks=1
 #SBATCH --cpus-per-task=1
-#SBATCH --chdir=$(q "$PWD")
-#SBATCH --output=$(q "$out")/merge.log
+#SBATCH --chdir=$PWD
+#SBATCH --output=$out/merge.log
 set -euo pipefail
 exec $(q "$bin") merge --json $(q "$out")/$cmd.json ${shards[*]}
 JOB

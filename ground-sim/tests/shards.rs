@@ -65,7 +65,7 @@ script=""
 for a in "$@"; do
     case $a in -*) ;; *) script=$a ;; esac
 done
-eval "cd $(sed -n 's/^#SBATCH --chdir=//p' "$script")"
+cd "$(sed -n 's/^#SBATCH --chdir=//p' "$script")"
 range=$(sed -n 's/^#SBATCH --array=//p' "$script")
 if [[ -n $range ]]; then
     for ((i = ${range%-*}; i <= ${range#*-}; i++)); do
