@@ -36,6 +36,9 @@ enum Commands {
     Eval(cli::eval::Args),
     /// Campaign of closed-loop hops: dynamics, IMU, TRN fixes, nav filter, guidance.
     Descent(cli::descent::Args),
+    /// Join the shard files of one `eval` or `descent` campaign (`--shard I/N`) into the summary,
+    /// CSV and pictures the unsharded command writes.
+    Merge(cli::merge::Args),
     /// The terrain suite: every scene × {truth-built, InSAR tile} × {no prior, prior} as eval
     /// campaigns, with the navigability map scored; one table, one picture, JSON.
     Suite(cli::suite::Args),
@@ -78,6 +81,7 @@ fn dispatch(cli: Cli) -> anyhow::Result<()> {
         Commands::Trn(a) => cli::trn::run(a),
         Commands::Eval(a) => cli::eval::run(a),
         Commands::Descent(a) => cli::descent::run(a),
+        Commands::Merge(a) => cli::merge::run(a),
         Commands::Suite(a) => cli::suite::run(a),
         Commands::Navmap(a) => cli::navmap::run(a),
         Commands::Sar(a) => run_sar(a.clone()),

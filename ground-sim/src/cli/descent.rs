@@ -1,21 +1,25 @@
 //! `ground-sim descent`: a campaign of closed-loop hops (dynamics, IMU, TRN frames, nav filter,
-//! guidance) over the truth terrain against a reference tile.
+//! guidance) over the truth terrain against a reference tile. With `--shard I/N` it flies one
+//! shard and writes a shard file for `ground-sim merge`.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 use anyhow::{Context, anyhow, bail};
 use ground_sim::dem::read_geotiff;
 use ground_sim::evaluation::campaign::percentile;
-use ground_sim::evaluation::descent::{DescentConfig, RunResult, fly};
+use ground_sim::evaluation::descent::{DescentConfig, DescentRecord, RunResult, fly};
+use ground_sim::evaluation::shard::{
+    CampaignInputs, SHARD_FORMAT, SHARD_VERSION, Shard, ShardFile,
+};
 use ground_sim::flyer::frames::{centre_extent, frame_reach_m};
-use ground_sim::flyer::onboard::{WORKSPACE_STACK, new_workspace};
+use ground_sim::flyer::onboard::{Budget, WORKSPACE_STACK, new_workspace};
 use ground_sim::pictures::plot::{Plot, Series, Style};
 use ground_sim::reference::load;
 use nav_core::{NavConfig, Navigator, Tile};
 use rand::{RngExt, SeedableRng};
 use rayon::prelude::*;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// Arguments of `ground-sim descent`.
 #[derive(Debug, clap::Args)]
@@ -47,16 +51,39 @@ pub struct Args {
     /// Fly without the star tracker.
     #[arg(long)]
     pub no_star_tracker: bool,
-    /// Summary JSON.
+    /// Summary JSON (with `--shard`: the shard file).
     #[arg(long)]
     pub json: PathBuf,
-    /// Folder for the trajectory and error pictures of the first run (default: beside the JSON).
+    /// Folder for the trajectory and error pictures of the first run (default: beside the JSON;
+    /// none with `--shard`: `merge` draws them).
     #[arg(long)]
     pub png: Option<PathBuf>,
     /// The navigator budget.
     #[command(flatten)]
     pub budget: super::BudgetArgs,
+    /// Which shard of the campaign to fly.
+    #[command(flatten)]
+    pub shard: super::ShardArgs,
 }
+
+/// What decides a descent campaign's hops besides the tile and the DEM (a shard file's spec).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct DescentSpec {
+    /// Hops in the whole campaign.
+    pub runs: usize,
+    /// Campaign seed.
+    pub seed: u64,
+    /// The navigator budget.
+    pub budget: Budget,
+    /// Scenario and vehicle settings.
+    pub config: DescentConfig,
+}
+
+/// A shard file of `descent`: the campaign spec and one record per hop.
+pub type DescentShard = ShardFile<DescentSpec, DescentRecord>;
+
+/// `kind` of `descent` shard files.
+pub const KIND: &str = "descent";
 
 /// Campaign summary (the JSON of `ground-sim descent`).
 #[derive(Debug, Serialize)]
@@ -137,14 +164,17 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
     let pool = rayon::ThreadPoolBuilder::new()
         .stack_size(WORKSPACE_STACK)
         .build()?;
-    let pb = super::progress(a.runs as u64, "descent");
+    let shard = a.shard.shard.unwrap_or(Shard::WHOLE);
+    let runs = shard.trials(a.runs);
+    let pb = super::progress(runs.len() as u64, "descent");
     let done = AtomicUsize::new(0);
-    let results: Vec<anyhow::Result<RunResult>> = pool.install(|| {
-        (0..a.runs)
-            .into_par_iter()
+    let results: Vec<anyhow::Result<DescentRecord>> = pool.install(|| {
+        runs.par_iter()
             .map_init(
                 || new_workspace(a.budget.budget),
-                |ws, i| {
+                |ws, &i| {
+                    // Seeded by (campaign seed, run index) alone: a hop flies the same in any
+                    // shard.
                     let mut rng = rand_pcg::Pcg64::seed_from_u64(
                         a.seed.wrapping_mul(0x2545_F491_4F6C_DD1D) ^ (i as u64 + 1),
                     );
@@ -167,29 +197,82 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
                     let (r, t) = pick.ok_or_else(|| anyhow!("run {i}: no hop fits the DEM"))?;
                     let out = fly(i, &dem, &nav, ws, &cfg, r, t, rng.random::<u64>());
                     pb.set_position(done.fetch_add(1, Ordering::Relaxed) as u64 + 1);
-                    out
+                    // Run 0 is the pictured one: keep its history.
+                    out.map(|r| DescentRecord::new(r, i == 0))
                 },
             )
             .collect()
     });
     pb.finish_and_clear();
-    let per_run: Vec<RunResult> = results.into_iter().collect::<anyhow::Result<_>>()?;
-    let mut land: Vec<f64> = per_run.iter().map(|r| r.landing_err_m).collect();
-    let samples: usize = per_run.iter().map(|r| r.history.len()).sum();
-    let sq: f64 = per_run
-        .iter()
-        .flat_map(|r| r.history.iter())
-        .map(|s| (s.truth_m[0] - s.est_m[0]).powi(2) + (s.truth_m[1] - s.est_m[1]).powi(2))
-        .sum();
-    let in_band = per_run
-        .iter()
-        .flat_map(|r| r.history.iter())
-        .filter(|s| (0.0506..=7.378).contains(&s.nees))
-        .count();
-    let summary = DescentSummary {
-        runs: per_run.len(),
+    let records: Vec<DescentRecord> = results.into_iter().collect::<anyhow::Result<_>>()?;
+    let spec = DescentSpec {
+        runs: a.runs,
+        seed: a.seed,
+        budget: a.budget.budget,
+        config: cfg,
+    };
+    if a.shard.shard.is_none() {
+        let dir = a
+            .png
+            .clone()
+            .unwrap_or_else(|| a.json.parent().map(|p| p.to_path_buf()).unwrap_or_default());
+        return report(&spec, records, &a.json, &dir);
+    }
+    let file = DescentShard {
+        format: SHARD_FORMAT.into(),
+        version: SHARD_VERSION,
+        kind: KIND.into(),
+        shard,
+        trials: a.runs,
         seed: a.seed,
         budget: a.budget.budget.label(),
+        inputs: CampaignInputs::new(&reference.tile_bytes, &a.dem)?,
+        spec,
+        trial_indices: runs,
+        records,
+    };
+    file.write(&a.json)?;
+    println!(
+        "shard        {shard} of the campaign: {} of {} hops (seed {})\nshard file   {}",
+        file.records.len(),
+        a.runs,
+        a.seed,
+        a.json.display()
+    );
+    Ok(())
+}
+
+/// Summarise a whole campaign's records (run order), print it, write its JSON and the pictures
+/// of run 0 into `png_dir`: what `descent` writes unsharded and `merge` writes from the shards.
+pub fn report(
+    spec: &DescentSpec,
+    records: Vec<DescentRecord>,
+    json: &Path,
+    png_dir: &Path,
+) -> anyhow::Result<()> {
+    if records.is_empty() {
+        bail!("a descent campaign needs at least one run");
+    }
+    // Sums per run, then over runs in run order: a shard keeps only each run's totals.
+    let samples: usize = records.iter().map(|r| r.totals.samples).sum();
+    let sq: f64 = records.iter().map(|r| r.totals.sq_err_m2).sum();
+    let in_band: usize = records.iter().map(|r| r.totals.nees_in_band).sum();
+    let nees_sum: f64 = records.iter().map(|r| r.totals.nees_finite_sum).sum();
+    let mut pictured = None;
+    let mut per_run = Vec::with_capacity(records.len());
+    for r in records {
+        if let Some(h) = r.history {
+            let mut shown = r.result.clone();
+            shown.history = h;
+            pictured.get_or_insert(shown);
+        }
+        per_run.push(r.result);
+    }
+    let mut land: Vec<f64> = per_run.iter().map(|r| r.landing_err_m).collect();
+    let summary = DescentSummary {
+        runs: per_run.len(),
+        seed: spec.seed,
+        budget: spec.budget.label(),
         landing_err_p50_m: percentile(&mut land.clone(), 0.5),
         landing_err_p95_m: percentile(&mut land.clone(), 0.95),
         landing_err_max_m: land.iter().copied().fold(0.0, f64::max),
@@ -198,16 +281,10 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         rejected_fixes: per_run.iter().map(|r| r.rejected_fixes).sum(),
         no_fixes: per_run.iter().map(|r| r.no_fixes).sum(),
         nees_in_band_frac: in_band as f64 / samples.max(1) as f64,
-        nees_mean: per_run
-            .iter()
-            .flat_map(|r| r.history.iter())
-            .map(|s| s.nees)
-            .filter(|v| v.is_finite())
-            .sum::<f64>()
-            / samples.max(1) as f64,
+        nees_mean: nees_sum / samples.max(1) as f64,
         hop_mean_m: per_run.iter().map(|r| r.hop_m).sum::<f64>() / per_run.len() as f64,
         flight_mean_s: per_run.iter().map(|r| r.flight_s).sum::<f64>() / per_run.len() as f64,
-        config: cfg,
+        config: spec.config,
         per_run,
     };
     land.clear();
@@ -227,14 +304,10 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         "consistency  {:.1} % of horizontal NEES values in the 95 % band",
         summary.nees_in_band_frac * 100.0
     );
-    super::write_json(&a.json, &summary)?;
-    println!("json         {}", a.json.display());
-    let dir = a
-        .png
-        .clone()
-        .unwrap_or_else(|| a.json.parent().map(|p| p.to_path_buf()).unwrap_or_default());
-    if let Some(r) = summary.per_run.first() {
-        write_pictures(r, &dir)?;
+    super::write_json(json, &summary)?;
+    println!("json         {}", json.display());
+    if let Some(r) = &pictured {
+        write_pictures(r, png_dir)?;
     }
     Ok(())
 }

@@ -1,13 +1,18 @@
 //! `ground-sim eval`: a Monte-Carlo campaign of single frames at random positions, headings and
-//! scales inside the tile, scored against the truth; parallel on all cores.
+//! scales inside the tile, scored against the truth; parallel on all cores. With `--shard I/N`
+//! it flies one shard and writes a shard file for `ground-sim merge`.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::{Context, anyhow};
 use ground_sim::dem::read_geotiff;
 use ground_sim::evaluation::campaign::{
-    CampaignSpec, PriorSpec, print_summary, run_campaign, summarize, write_csv,
+    CampaignSpec, PriorSpec, print_summary, run_trials, summarize, write_csv_trials,
 };
+use ground_sim::evaluation::shard::{
+    CampaignInputs, SHARD_FORMAT, SHARD_VERSION, Shard, ShardFile,
+};
+use ground_sim::evaluation::trn::TrnScore;
 use ground_sim::reference::load;
 use nav_core::{NavConfig, Tile};
 
@@ -38,7 +43,7 @@ pub struct Args {
     /// The prior given with each frame, as the nav filter would in flight.
     #[command(flatten)]
     pub prior: PriorArgs,
-    /// Summary JSON.
+    /// Summary JSON (with `--shard`: the shard file).
     #[arg(long)]
     pub json: PathBuf,
     /// One CSV row per trial (default: next to the JSON, `.csv`).
@@ -47,7 +52,20 @@ pub struct Args {
     /// The navigator budget.
     #[command(flatten)]
     pub budget: super::BudgetArgs,
+    /// Record 0 ms as every frame's onboard time: the outputs then repeat byte for byte (host
+    /// time is the only figure that changes from run to run).
+    #[arg(long)]
+    pub no_host_time: bool,
+    /// Which shard of the campaign to fly.
+    #[command(flatten)]
+    pub shard: super::ShardArgs,
 }
+
+/// A shard file of `eval`: the campaign spec and one score per trial.
+pub type EvalShard = ShardFile<CampaignSpec, TrnScore>;
+
+/// `kind` of `eval` shard files.
+pub const KIND: &str = "eval";
 
 /// The prior of a campaign on the command line: none unless `--prior-sigma-m` is given.
 #[derive(Debug, Clone, clap::Args)]
@@ -98,22 +116,63 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         sensor: a.sensor.model(),
         prior: a.prior.spec()?,
         budget: a.budget.budget,
+        host_time: !a.no_host_time,
     };
-    let pb = super::progress(a.trials as u64, "eval");
-    let rows = run_campaign(tile, NavConfig::default(), &dem, &spec, &pb)?;
+    let shard = a.shard.shard.unwrap_or(Shard::WHOLE);
+    let trials = shard.trials(spec.trials);
+    let pb = super::progress(trials.len() as u64, "eval");
+    let rows = run_trials(tile, NavConfig::default(), &dem, &spec, &trials, &pb)?;
     pb.finish_and_clear();
-    let summary = summarize(&rows, &spec);
-    print_summary(&summary);
-    super::write_json(&a.json, &summary)?;
     let csv_path = a
         .csv
         .clone()
         .unwrap_or_else(|| a.json.with_extension("csv"));
-    write_csv(&csv_path, &rows)?;
+    if a.shard.shard.is_none() {
+        return report(&spec, &rows, &a.json, &csv_path);
+    }
+    write_csv_trials(&csv_path, &trials, &rows)?;
+    let file = EvalShard {
+        format: SHARD_FORMAT.into(),
+        version: SHARD_VERSION,
+        kind: KIND.into(),
+        shard,
+        trials: spec.trials,
+        seed: spec.seed,
+        budget: spec.budget.label(),
+        inputs: CampaignInputs::new(&reference.tile_bytes, &a.dem)?,
+        spec,
+        trial_indices: trials,
+        records: rows,
+    };
+    file.write(&a.json)?;
     println!(
-        "json        {}\ncsv         {}",
+        "shard       {shard} of the campaign: {} of {} trials (seed {})\nshard file  {}\ncsv         {}",
+        file.records.len(),
+        spec.trials,
+        spec.seed,
         a.json.display(),
         csv_path.display()
+    );
+    Ok(())
+}
+
+/// Summarise a whole campaign's rows (trial order) and write its JSON and CSV: what `eval`
+/// writes unsharded and `merge` writes from the shards.
+pub fn report(
+    spec: &CampaignSpec,
+    rows: &[TrnScore],
+    json: &Path,
+    csv: &Path,
+) -> anyhow::Result<()> {
+    let summary = summarize(rows, spec);
+    print_summary(&summary);
+    super::write_json(json, &summary)?;
+    let trials: Vec<usize> = (0..rows.len()).collect();
+    write_csv_trials(csv, &trials, rows)?;
+    println!(
+        "json        {}\ncsv         {}",
+        json.display(),
+        csv.display()
     );
     Ok(())
 }

@@ -7,6 +7,7 @@ pub mod descent;
 pub mod eval;
 pub mod info;
 pub mod insar;
+pub mod merge;
 pub mod navmap;
 pub mod register;
 pub mod resample;
@@ -133,4 +134,14 @@ impl SensorArgs {
             ..ground_sim::flyer::frames::SensorModel::default()
         }
     }
+}
+
+/// How `eval` and `descent` split a campaign over processes or machines.
+#[derive(Debug, Clone, clap::Args)]
+pub struct ShardArgs {
+    /// Fly only shard I/N of the campaign: the trials k with k mod N = I, I 0-based
+    /// (0 ≤ I < N, as Slurm's SLURM_ARRAY_TASK_ID with --array=0-(N-1)). `--json` then receives
+    /// the shard file (campaign identity and per-trial records) that `ground-sim merge` joins.
+    #[arg(long, value_name = "I/N")]
+    pub shard: Option<ground_sim::evaluation::shard::Shard>,
 }

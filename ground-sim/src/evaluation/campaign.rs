@@ -13,7 +13,7 @@ use indicatif::ProgressBar;
 use nav_core::{NavConfig, Navigator, Prior, Tile};
 use rand::{RngExt, SeedableRng};
 use rayon::prelude::*;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::dem::Dem;
 use crate::evaluation::trn::{TrnScore, expected_rotation_rad, score};
@@ -22,7 +22,7 @@ use crate::flyer::onboard::{Budget, FrameInput, WORKSPACE_STACK, new_workspace, 
 
 /// The prior a campaign hands the navigator with every frame: what the nav filter would know in
 /// flight, drawn around the truth with these 1σ (Gaussian, per frame, seeded with the trial).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct PriorSpec {
     /// 1σ position error of the prior per axis, metres.
     pub sigma_m: f64,
@@ -33,7 +33,7 @@ pub struct PriorSpec {
 }
 
 /// What a campaign flies.
-#[derive(Debug, Clone, Copy, Serialize)]
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
 pub struct CampaignSpec {
     /// Number of frames.
     pub trials: usize,
@@ -49,6 +49,9 @@ pub struct CampaignSpec {
     pub prior: Option<PriorSpec>,
     /// The navigator budget (the flight one unless asked otherwise).
     pub budget: Budget,
+    /// Record each frame's onboard time on this host; `false` records 0 ms so that outputs
+    /// repeat byte for byte (the only field that changes from run to run).
+    pub host_time: bool,
 }
 
 /// Draw a standard normal variate (Box–Muller; one per call keeps the stream simple).
@@ -116,11 +119,29 @@ pub fn run_campaign(
     spec: &CampaignSpec,
     progress: &ProgressBar,
 ) -> anyhow::Result<Vec<TrnScore>> {
+    let all: Vec<usize> = (0..spec.trials).collect();
+    run_trials(tile, config, dem, spec, &all, progress)
+}
+
+/// Fly the campaign's trials `trials` (indices below `spec.trials`, e.g. one shard's): one
+/// scored row per index, in the given order. A trial's draws depend on (`spec.seed`, index) only,
+/// so it flies the same in any subset.
+pub fn run_trials(
+    tile: Tile<'_>,
+    config: NavConfig,
+    dem: &Dem,
+    spec: &CampaignSpec,
+    trials: &[usize],
+    progress: &ProgressBar,
+) -> anyhow::Result<Vec<TrnScore>> {
     if spec.trials == 0 {
         bail!("a campaign needs at least one trial");
     }
     if !(spec.pixel_min_m > 0.0 && spec.pixel_max_m >= spec.pixel_min_m) {
         bail!("need 0 < smallest frame pixel ≤ largest frame pixel");
+    }
+    if let Some(&k) = trials.iter().find(|&&k| k >= spec.trials) {
+        bail!("trial {k} is outside a campaign of {} trials", spec.trials);
     }
     let (x0, x1, y0, y1) = centre_box(&tile, dem, spec)?;
     let nav = Navigator::new(tile, config);
@@ -129,11 +150,11 @@ pub fn run_campaign(
         .stack_size(WORKSPACE_STACK)
         .build()?;
     let rows: Vec<anyhow::Result<TrnScore>> = pool.install(|| {
-        (0..spec.trials)
-            .into_par_iter()
+        trials
+            .par_iter()
             .map_init(
                 || new_workspace(spec.budget),
-                |ws, i| {
+                |ws, &i| {
                     // Each trial has its own seed: results do not depend on the thread count.
                     let mut rng = rand_pcg::Pcg64::seed_from_u64(
                         spec.seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ i as u64,
@@ -159,7 +180,11 @@ pub fn run_campaign(
                     )
                     .map_err(|e| anyhow!("trial {i}: {e}"))?;
                     progress.set_position(done.fetch_add(1, Ordering::Relaxed) as u64 + 1);
-                    Ok(score(nav.tile(), &run, &pose, frame.width, frame.height))
+                    let mut row = score(nav.tile(), &run, &pose, frame.width, frame.height);
+                    if !spec.host_time {
+                        row.time_ms = 0.0;
+                    }
+                    Ok(row)
                 },
             )
             .collect()
@@ -355,8 +380,18 @@ pub fn print_summary(s: &EvalSummary) {
     );
 }
 
-/// Write one CSV row per trial.
+/// Write one CSV row per trial, numbered from 0.
 pub fn write_csv(path: &Path, rows: &[TrnScore]) -> anyhow::Result<()> {
+    let trials: Vec<usize> = (0..rows.len()).collect();
+    write_csv_trials(path, &trials, rows)
+}
+
+/// Write one CSV row per trial; `trials[k]` is row `k`'s campaign trial index (a shard's rows
+/// keep the campaign's numbering).
+pub fn write_csv_trials(path: &Path, trials: &[usize], rows: &[TrnScore]) -> anyhow::Result<()> {
+    if trials.len() != rows.len() {
+        bail!("{} trial indices for {} rows", trials.len(), rows.len());
+    }
     crate::ensure_parent(path)?;
     let mut csv = std::io::BufWriter::new(
         std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?,
@@ -366,7 +401,7 @@ pub fn write_csv(path: &Path, rows: &[TrnScore]) -> anyhow::Result<()> {
         "trial,x_m,y_m,heading_deg,pixel_m,fix,false_fix,features,matches,inliers,rotation_deg,heading_err_deg,scale,scale_truth,pos_err_m,center_err_px,reg_err_mean_px,reg_err_max_px,center_sigma_m,nees,time_ms,refined,ncc,refined_sigma_m,refine_note,area_search,no_fix_reason"
     )?;
     let o = |v: Option<f64>| v.map_or(String::new(), |x| format!("{x:.6}"));
-    for (i, r) in rows.iter().enumerate() {
+    for (i, r) in trials.iter().zip(rows) {
         let t = r.truth.unwrap_or(FramePose {
             x_m: f64::NAN,
             y_m: f64::NAN,

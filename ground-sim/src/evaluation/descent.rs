@@ -10,14 +10,15 @@
 use nav_core::filter::{FilterConfig, FixMeasurement, InitialState, NavFilter, UpdateOutcome};
 use nav_core::{Navigator, Prior};
 use rand::{RngExt, SeedableRng};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::dem::Dem;
+use crate::evaluation::shard::f64_or_nan;
 use crate::flyer::frames::{FramePose, SensorModel, height_at_geo, synth_frame};
 use crate::flyer::onboard::{FrameInput, Workspace, run_frame};
 
 /// Scenario and vehicle settings.
-#[derive(Debug, Clone, Copy, Serialize)]
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
 pub struct DescentConfig {
     /// Cruise height above the release point's terrain, m.
     pub cruise_agl_m: f64,
@@ -93,7 +94,7 @@ impl Default for DescentConfig {
 }
 
 /// One sample of a run's history (at the frame rate).
-#[derive(Debug, Clone, Copy, Serialize)]
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
 pub struct Sample {
     /// Time since release, s.
     pub t_s: f64,
@@ -103,7 +104,9 @@ pub struct Sample {
     pub est_m: [f64; 3],
     /// 1σ of east and north, m.
     pub sigma_m: [f64; 2],
-    /// Horizontal NEES (χ² with 2 dof if consistent).
+    /// Horizontal NEES (χ² with 2 dof if consistent; ∞ for a singular covariance, read back
+    /// from JSON as NaN).
+    #[serde(deserialize_with = "f64_or_nan")]
     pub nees: f64,
     /// 0 no frame, 1 fix accepted, 2 fix rejected by the filter gate, 3 no fix.
     pub fix_state: u8,
@@ -111,8 +114,8 @@ pub struct Sample {
     pub fix_m: Option<[f64; 2]>,
 }
 
-/// Outcome of one hop.
-#[derive(Debug, Clone, Serialize)]
+/// Outcome of one hop. Undefined figures are NaN (JSON `null`, read back as NaN).
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct RunResult {
     /// Run index.
     pub run: usize,
@@ -121,20 +124,28 @@ pub struct RunResult {
     /// Target, m.
     pub target_m: [f64; 2],
     /// Hop length, m.
+    #[serde(deserialize_with = "f64_or_nan")]
     pub hop_m: f64,
     /// Flight time, s.
+    #[serde(deserialize_with = "f64_or_nan")]
     pub flight_s: f64,
     /// Horizontal distance from the landing point to the target, m.
+    #[serde(deserialize_with = "f64_or_nan")]
     pub landing_err_m: f64,
     /// Horizontal navigation error at touchdown, m.
+    #[serde(deserialize_with = "f64_or_nan")]
     pub nav_err_at_landing_m: f64,
     /// Horizontal navigation error at the last accepted fix, m.
+    #[serde(deserialize_with = "f64_or_nan")]
     pub nav_err_at_last_fix_m: f64,
     /// Horizontal velocity error at the last accepted fix, m/s.
+    #[serde(deserialize_with = "f64_or_nan")]
     pub vel_err_at_last_fix_mps: f64,
     /// Time from the last accepted fix to touchdown, s.
+    #[serde(deserialize_with = "f64_or_nan")]
     pub unaided_s: f64,
     /// RMS horizontal navigation error over the flight (frame times), m.
+    #[serde(deserialize_with = "f64_or_nan")]
     pub nav_err_rms_m: f64,
     /// Fixes accepted by the filter.
     pub fixes: usize,
@@ -143,12 +154,71 @@ pub struct RunResult {
     /// Frames without a fix.
     pub no_fixes: usize,
     /// Fraction of frame times with the horizontal NEES inside the 95 % χ²(2) band.
+    #[serde(deserialize_with = "f64_or_nan")]
     pub nees_in_band_frac: f64,
     /// Mean horizontal NEES (2 for a consistent filter; smaller: pessimistic covariance).
+    #[serde(deserialize_with = "f64_or_nan")]
     pub nees_mean: f64,
     /// History at the frame rate.
     #[serde(skip)]
     pub history: Vec<Sample>,
+}
+
+/// Sums over one run's history that a campaign summary needs, so that a campaign can be
+/// summarised from per-run records without every run's history (shards keep only run 0's).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct HistoryTotals {
+    /// Samples (frame times).
+    pub samples: usize,
+    /// Σ squared horizontal navigation error, m².
+    pub sq_err_m2: f64,
+    /// Samples with the horizontal NEES in the 95 % χ²(2) band.
+    pub nees_in_band: usize,
+    /// Σ of the finite horizontal NEES values.
+    pub nees_finite_sum: f64,
+}
+
+/// The 95 % band of χ²(2): a consistent filter's horizontal NEES lies in it 95 % of the time.
+pub const NEES2_BAND_95: std::ops::RangeInclusive<f64> = 0.0506..=7.378;
+
+impl HistoryTotals {
+    /// The totals of history `h`.
+    pub fn of(h: &[Sample]) -> Self {
+        Self {
+            samples: h.len(),
+            sq_err_m2: h
+                .iter()
+                .map(|s| (s.truth_m[0] - s.est_m[0]).powi(2) + (s.truth_m[1] - s.est_m[1]).powi(2))
+                .sum(),
+            nees_in_band: h.iter().filter(|s| NEES2_BAND_95.contains(&s.nees)).count(),
+            nees_finite_sum: h.iter().map(|s| s.nees).filter(|v| v.is_finite()).sum(),
+        }
+    }
+}
+
+/// One hop as a campaign keeps it: its result, its history's totals and, for the run that is
+/// pictured (run 0), its history.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct DescentRecord {
+    /// The hop's result (its `history` empty).
+    pub result: RunResult,
+    /// Totals over its history.
+    pub totals: HistoryTotals,
+    /// The history itself, kept for run 0 only (its pictures).
+    pub history: Option<Vec<Sample>>,
+}
+
+impl DescentRecord {
+    /// Keep `r`'s history totals, and its history if `keep_history`.
+    pub fn new(mut r: RunResult, keep_history: bool) -> Self {
+        let totals = HistoryTotals::of(&r.history);
+        let history = std::mem::take(&mut r.history);
+        Self {
+            result: r,
+            totals,
+            history: keep_history.then_some(history),
+        }
+    }
 }
 
 /// Horizontal NEES of error `(ex, ey)` under covariance `c` (m²).
@@ -416,11 +486,7 @@ pub fn fly(
         .sum::<f64>()
         / n)
         .sqrt();
-    out.nees_in_band_frac = h
-        .iter()
-        .filter(|s| (0.0506..=7.378).contains(&s.nees))
-        .count() as f64
-        / n;
+    out.nees_in_band_frac = h.iter().filter(|s| NEES2_BAND_95.contains(&s.nees)).count() as f64 / n;
     out.nees_mean = h.iter().map(|s| s.nees).sum::<f64>() / n;
     Ok(out)
 }

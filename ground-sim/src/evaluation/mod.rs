@@ -5,5 +5,6 @@ pub mod campaign;
 pub mod descent;
 pub mod navmap;
 pub mod register;
+pub mod shard;
 pub mod suite;
 pub mod trn;

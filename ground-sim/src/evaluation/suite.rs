@@ -336,6 +336,7 @@ pub fn run_scene(
                 sensor: spec.sensor,
                 prior: *prior,
                 budget: spec.budget,
+                host_time: true,
             };
             let tag = format!("{}-{}", kind.name(), prior_tag(prior.as_ref()));
             progress.set_message(format!("{}: {tag}", scene.name));

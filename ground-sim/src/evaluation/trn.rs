@@ -2,7 +2,7 @@
 //! chain said.
 
 use nav_core::{Fix, Tile, TileHeader};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::flyer::frames::FramePose;
 use crate::flyer::onboard::FrameRun;
@@ -24,7 +24,9 @@ pub fn truth_to_tile(
 }
 
 /// Scores of one frame (the JSON of `ground-sim trn`, one row of `eval`).
-#[derive(Debug, Clone, Serialize, Default)]
+// Option<f64> fields keep ±∞/NaN through JSON (`opt_f64`): campaign shards must read back the
+// very values a summary counts.
+#[derive(Debug, Clone, Serialize, Deserialize, Default)]
 pub struct TrnScore {
     /// Whether the gate gave a fix.
     pub fix: bool,
@@ -48,29 +50,39 @@ pub struct TrnScore {
     pub ncc: Option<f32>,
     /// The refinement's own statistical 1σ of the centre per axis, metres (`Refined`'s
     /// covariance; the fix itself reports the feature covariance in `center_sigma_m`).
+    #[serde(with = "crate::evaluation::shard::opt_f64")]
     pub refined_sigma_m: Option<f64>,
     /// Estimated rotation, degrees.
+    #[serde(with = "crate::evaluation::shard::opt_f64")]
     pub rotation_deg: Option<f64>,
     /// Heading error, degrees (wrapped to ±180).
+    #[serde(with = "crate::evaluation::shard::opt_f64")]
     pub heading_err_deg: Option<f64>,
     /// Estimated scale (tile px per frame px).
+    #[serde(with = "crate::evaluation::shard::opt_f64")]
     pub scale: Option<f64>,
     /// True scale.
     pub scale_truth: f64,
     /// Mean registration error over the inliers, reference pixels (fix map vs truth map at each
     /// inlier's frame position).
+    #[serde(with = "crate::evaluation::shard::opt_f64")]
     pub pos_err_mean_px: Option<f64>,
     /// Max registration error over the inliers, reference pixels.
+    #[serde(with = "crate::evaluation::shard::opt_f64")]
     pub pos_err_max_px: Option<f64>,
     /// Error of the frame centre, reference pixels.
+    #[serde(with = "crate::evaluation::shard::opt_f64")]
     pub center_err_px: Option<f64>,
     /// Error of the frame centre, metres.
+    #[serde(with = "crate::evaluation::shard::opt_f64")]
     pub pos_err_m: Option<f64>,
     /// Reported 1σ of the centre, metres (the larger principal axis of its covariance).
+    #[serde(with = "crate::evaluation::shard::opt_f64")]
     pub center_sigma_m: Option<f64>,
     /// Normalised estimation error squared of the centre: `eᵀ C⁻¹ e` with `e` the geo error
     /// (metres, east/north) and `C` the fix's reported covariance; 2 on average (2 dof) when
     /// the covariance is consistent, ≤ 9 (the 3σ ellipse) for 98.9 % of consistent fixes.
+    #[serde(with = "crate::evaluation::shard::opt_f64")]
     pub nees: Option<f64>,
     /// Onboard time on this host, ms.
     pub time_ms: f64,

@@ -8,12 +8,12 @@
 //! Frame pixel centres are at integer coordinates; the frame centre is `((w−1)/2, (h−1)/2)`.
 
 use rand::{RngExt, SeedableRng};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::dem::{Dem, DemError};
 
 /// The ranging sensor that produces onboard DEM patches.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct SensorModel {
     /// Frame width, pixels.
     pub width_px: usize,
@@ -41,7 +41,7 @@ impl Default for SensorModel {
 }
 
 /// Where a frame is taken.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct FramePose {
     /// Geo x (east) of the frame centre, metres.
     pub x_m: f64,

@@ -22,7 +22,17 @@ pub const HOST_MATCHES: usize = 256;
 pub const WORKSPACE_STACK: usize = 64 << 20;
 
 /// Which navigator budget a ground run uses.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, clap::ValueEnum)]
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Eq,
+    Default,
+    serde::Serialize,
+    serde::Deserialize,
+    clap::ValueEnum,
+)]
 #[serde(rename_all = "lowercase")]
 pub enum Budget {
     /// The firmware's: [`nav_core::flight`] (200 × 200 px frames, 16 keypoints, 128 matches).

@@ -1,0 +1,295 @@
+//! Sharded campaigns: `eval` and `descent` split into N = 1, 3, 7 shards (background processes
+//! through `tools/local-shards.sh`) and merged give byte for byte the summary, CSV and pictures
+//! of the single run; `tools/slurm-campaign.sh`'s job scripts do the same under a stand-in
+//! `sbatch` (no Slurm here); `merge` refuses gaps, duplicates and shards of another campaign;
+//! `--shard` refuses malformed text.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn ground_sim(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_ground-sim"))
+        .args(args)
+        .output()
+        .expect("ground-sim runs")
+}
+
+fn run(args: &[&str]) -> String {
+    let out = ground_sim(args);
+    let text = String::from_utf8_lossy(&out.stdout).to_string();
+    assert!(
+        out.status.success(),
+        "ground-sim {args:?} failed:\n{text}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    text
+}
+
+/// Run `args` expecting failure; its stderr.
+fn fails(args: &[&str]) -> String {
+    let out = ground_sim(args);
+    assert!(!out.status.success(), "ground-sim {args:?} should fail");
+    String::from_utf8_lossy(&out.stderr).to_string()
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().expect("utf-8 temp path")
+}
+
+/// `tools/local-shards.sh N OUT CMD ARGS...` with this build's binary.
+fn local_shards(n: usize, out: &Path, cmd: &str, args: &[&str]) {
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tools/local-shards.sh");
+    let o = Command::new("bash")
+        .arg(script)
+        .arg(n.to_string())
+        .arg(out)
+        .arg(cmd)
+        .args(args)
+        .env("GROUND_SIM", env!("CARGO_BIN_EXE_ground-sim"))
+        .output()
+        .expect("bash runs");
+    assert!(
+        o.status.success(),
+        "local-shards {n} {cmd} failed:\n{}\n{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
+}
+
+/// A stand-in for Slurm's `sbatch`: runs the job script at once (array tasks in turn, with
+/// `SLURM_ARRAY_TASK_ID` set) in its `--chdir`, and prints a job id as `--parsable` does. A
+/// failing task fails the submission, which is what `afterok` makes of the merge.
+const FAKE_SBATCH: &str = r#"#!/usr/bin/env bash
+set -euo pipefail
+script=""
+for a in "$@"; do
+    case $a in -*) ;; *) script=$a ;; esac
+done
+cd "$(sed -n 's/^#SBATCH --chdir=//p' "$script")"
+range=$(sed -n 's/^#SBATCH --array=//p' "$script")
+if [[ -n $range ]]; then
+    for ((i = ${range%-*}; i <= ${range#*-}; i++)); do
+        SLURM_ARRAY_TASK_ID=$i SLURM_CPUS_PER_TASK=1 bash "$script" >&2
+    done
+else
+    bash "$script" >&2
+fi
+echo "$RANDOM"
+"#;
+
+/// `tools/slurm-campaign.sh N OUT CMD ARGS...` with this build's binary and [`FAKE_SBATCH`].
+fn slurm_campaign(n: usize, out: &Path, cmd: &str, args: &[&str], bin_dir: &Path) {
+    std::fs::create_dir_all(bin_dir).unwrap();
+    let sbatch = bin_dir.join("sbatch");
+    std::fs::write(&sbatch, FAKE_SBATCH).unwrap();
+    std::fs::set_permissions(&sbatch, std::os::unix::fs::PermissionsExt::from_mode(0o755)).unwrap();
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tools/slurm-campaign.sh");
+    let path = format!("{}:{}", bin_dir.display(), std::env::var("PATH").unwrap());
+    let o = Command::new("bash")
+        .arg(script)
+        .arg(n.to_string())
+        .arg(out)
+        .arg(cmd)
+        .args(args)
+        .env("GROUND_SIM", env!("CARGO_BIN_EXE_ground-sim"))
+        .env("PATH", path)
+        .output()
+        .expect("bash runs");
+    assert!(
+        o.status.success(),
+        "slurm-campaign {n} {cmd} failed:\n{}\n{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let job = std::fs::read_to_string(out.join("slurm/shard.sbatch")).unwrap();
+    assert!(
+        job.contains(&format!("#SBATCH --array=0-{}", n - 1)),
+        "{job}"
+    );
+}
+
+fn assert_same_bytes(a: &Path, b: &Path) {
+    let (x, y) = (std::fs::read(a).unwrap(), std::fs::read(b).unwrap());
+    assert!(
+        x == y,
+        "{} and {} differ:\n{}\n---\n{}",
+        a.display(),
+        b.display(),
+        String::from_utf8_lossy(&x),
+        String::from_utf8_lossy(&y)
+    );
+}
+
+/// A generated 8 km floor and its reference folder (as `closed_loop`).
+fn scene(dir: &Path) -> (PathBuf, PathBuf) {
+    let (dem, reference) = (dir.join("dem.tif"), dir.join("ref"));
+    run(&[
+        "terrain",
+        "--preset",
+        "shoemaker",
+        "--seed",
+        "3",
+        "--size-m",
+        "8000",
+        "--pixel-m",
+        "10",
+        "--out",
+        s(&dem),
+    ]);
+    run(&["tile", "--dem", s(&dem), "--out", s(&reference)]);
+    (dem, reference)
+}
+
+#[test]
+fn merged_shards_equal_the_single_run_byte_for_byte() {
+    let dir = tempfile::tempdir().unwrap();
+    let (dem, reference) = scene(dir.path());
+    let t0 = std::time::Instant::now();
+
+    // eval: host time off, the only figure that differs from run to run.
+    let eval_args = [
+        "--tile",
+        s(&reference),
+        "--dem",
+        s(&dem),
+        "--trials",
+        "21",
+        "--seed",
+        "5",
+        "--no-host-time",
+    ];
+    let single = dir.path().join("eval-single");
+    let json = single.join("eval.json");
+    run(&[&["eval"][..], &eval_args, &["--json", s(&json)]].concat());
+    for n in [1, 3, 7] {
+        let out = dir.path().join(format!("eval-{n}"));
+        local_shards(n, &out, "eval", &eval_args);
+        assert_same_bytes(&json, &out.join("eval.json"));
+        assert_same_bytes(&single.join("eval.csv"), &out.join("eval.csv"));
+    }
+    // The Slurm job scripts (a stand-in sbatch runs them here).
+    let out = dir.path().join("eval-slurm-3");
+    slurm_campaign(3, &out, "eval", &eval_args, &dir.path().join("fake-bin"));
+    assert_same_bytes(&json, &out.join("eval.json"));
+    assert_same_bytes(&single.join("eval.csv"), &out.join("eval.csv"));
+    println!("eval: {:.1} s", t0.elapsed().as_secs_f64());
+    // The figures are real: some frames were flown and fixed.
+    let e: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert_eq!(e["trials"], 21, "{e}");
+    assert!(e["success_rate"].as_f64().unwrap() > 0.5, "{e}");
+
+    let t1 = std::time::Instant::now();
+    let descent_args = [
+        "--tile",
+        s(&reference),
+        "--dem",
+        s(&dem),
+        "--runs",
+        "4",
+        "--seed",
+        "2",
+        "--hop-min-m",
+        "2000",
+        "--hop-max-m",
+        "2500",
+    ];
+    let single = dir.path().join("descent-single");
+    let json = single.join("descent.json");
+    run(&[&["descent"][..], &descent_args, &["--json", s(&json)]].concat());
+    for n in [1, 3, 7] {
+        let out = dir.path().join(format!("descent-{n}"));
+        local_shards(n, &out, "descent", &descent_args);
+        assert_same_bytes(&json, &out.join("descent.json"));
+        for png in ["descent-trajectory.png", "descent-error.png"] {
+            assert_same_bytes(&single.join(png), &out.join(png));
+        }
+    }
+    println!("descent: {:.1} s", t1.elapsed().as_secs_f64());
+    let d: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert_eq!(d["runs"], 4, "{d}");
+    assert!(d["fixes"].as_u64().unwrap() > 20, "{d}");
+
+    // merge refuses what is not one whole campaign.
+    let sh = |n: usize, i: usize| dir.path().join(format!("eval-{n}/shards/shard-{i}.json"));
+    let e = fails(&[
+        "merge",
+        "--json",
+        s(&dir.path().join("x.json")),
+        s(&sh(3, 0)),
+        s(&sh(3, 2)),
+    ]);
+    assert!(e.contains("shard(s) 1/3 missing"), "{e}");
+    let e = fails(&[
+        "merge",
+        "--json",
+        s(&dir.path().join("x.json")),
+        s(&sh(3, 0)),
+        s(&sh(3, 1)),
+        s(&sh(3, 1)),
+    ]);
+    assert!(e.contains("shard 1/3 given twice"), "{e}");
+    let e = fails(&[
+        "merge",
+        "--json",
+        s(&dir.path().join("x.json")),
+        s(&sh(3, 0)),
+        s(&sh(7, 1)),
+    ]);
+    assert!(
+        e.contains("different campaigns") && e.contains("shard count N"),
+        "{e}"
+    );
+    let other = dir.path().join("other-seed.json");
+    run(&[
+        &["eval"][..],
+        &eval_args[..6],
+        &[
+            "--seed",
+            "6",
+            "--no-host-time",
+            "--shard",
+            "1/3",
+            "--json",
+            s(&other),
+        ],
+    ]
+    .concat());
+    let e = fails(&[
+        "merge",
+        "--json",
+        s(&dir.path().join("x.json")),
+        s(&sh(3, 0)),
+        s(&other),
+        s(&sh(3, 2)),
+    ]);
+    assert!(
+        e.contains("different campaigns") && e.contains("seed: 5 vs 6"),
+        "{e}"
+    );
+    let e = fails(&[
+        "merge",
+        "--json",
+        s(&dir.path().join("x.json")),
+        s(&dir.path().join("descent-1/shards/shard-0.json")),
+        s(&sh(1, 0)),
+    ]);
+    assert!(e.contains("holds a `eval` shard, not `descent`"), "{e}");
+}
+
+#[test]
+fn shard_text_is_checked() {
+    for (bad, why) in [
+        ("3/3", "out of range"),
+        ("0/0", "at least 1"),
+        ("1-3", "malformed"),
+        ("-1/3", "malformed"),
+        ("a/b", "malformed"),
+    ] {
+        // `=` so that clap reads `-1/3` as the value, not as a flag.
+        let flag = format!("--shard={bad}");
+        let e = fails(&["eval", "--tile", "x", "--dem", "y", "--json", "z", &flag]);
+        assert!(e.contains(why), "--shard {bad}: {e}");
+    }
+}
