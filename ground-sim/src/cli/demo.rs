@@ -23,6 +23,7 @@ use ground_sim::insar::InsarConfig;
 use ground_sim::insar::pipeline::process_simulated;
 use ground_sim::insar::products::{InsarReport, RunContext, SarSummary, write_outputs};
 use ground_sim::reference::load;
+use ground_sim::sar::RadarPreset;
 use ground_sim::sar::SarDem;
 use ground_sim::sar::cli::RadarArgs;
 use ground_sim::sar::pipeline::{SimOptions, simulate_with};
@@ -45,6 +46,9 @@ pub struct Args {
     /// Heading of the TRN frame: its +x axis, clockwise from east, degrees.
     #[arg(long, default_value_t = 0.0)]
     pub heading_deg: f64,
+    /// Radar design (default `paper`: 8 m baseline; `mission`: 32 m).
+    #[arg(long, value_enum)]
+    pub radar: Option<RadarPreset>,
     /// Thermal noise of the radar, NESZ in dB (default: none, the paper's echo model).
     #[arg(long, allow_hyphen_values = true)]
     pub nesz_db: Option<f64>,
@@ -118,6 +122,7 @@ pub fn run_demo(a: &Args) -> anyhow::Result<DemoSummary> {
     let t0 = Instant::now();
     let truth = ground_sim::dem::read_geotiff(&dem_path)?;
     let radar = RadarArgs {
+        radar: a.radar,
         nesz_db: a.nesz_db,
         ..RadarArgs::default()
     };

@@ -41,11 +41,16 @@ pub struct Args {
     /// paper's chain, heights at the window centres).
     #[arg(long, default_value_t = InsarConfig::default().recentre_passes)]
     pub recentre_passes: usize,
+    /// Mask dark cells (window power this many dB below the scene median) as shadow; `inf`
+    /// masks by geometry and coherence only.
+    #[arg(long, allow_hyphen_values = true, default_value_t = InsarConfig::default().shadow_below_median_db)]
+    pub shadow_below_median_db: f64,
     /// Use the flat-removed phase wrapped (no unwrapping).
     #[arg(long)]
     pub no_unwrap: bool,
-    /// Radar parameters (the first `--pol` is the InSAR channel, default HH). Thermal noise is
-    /// off unless `--nesz-db` is given (the paper's echo model).
+    /// Radar parameters (the first `--pol` is the InSAR channel, default HH; `--radar mission`
+    /// for the 32 m baseline). Thermal noise is off unless `--nesz-db` is given (the paper's
+    /// echo model).
     #[command(flatten)]
     pub radar: RadarArgs,
     /// Hide progress bars.
@@ -55,8 +60,8 @@ pub struct Args {
 
 /// The radar configuration of an InSAR run: `RadarArgs` resolved as for `sar`, but only the
 /// InSAR channel (first `--pol`, default HH) and **no thermal noise unless `--nesz-db` is
-/// given** — the paper's echo model (eqs 11–13) has none, and at the SAR's default NESZ of
-/// −30 dB the 8 m baseline gives ≈ 7 m of height noise per 20 m pixel (docs/insar.md).
+/// given** — the paper's echo model (eqs 11–13) has none. Noise stays opt-in because no radar
+/// here yet gives a tile TRN navigates reliably at NESZ −25 dB (docs/insar.md).
 pub fn radar_config(r: &RadarArgs) -> anyhow::Result<(ground_sim::sar::SarConfig, Polarisation)> {
     let mut sar = r.resolve()?;
     let pol = r.pol.first().copied().unwrap_or(Polarisation::HH);
@@ -76,6 +81,7 @@ pub fn run_chain(a: &Args) -> anyhow::Result<InsarReport> {
         unwrap: !a.no_unwrap,
         dem_filter_sigma_px: a.dem_filter_sigma_px,
         recentre_passes: a.recentre_passes,
+        shadow_below_median_db: a.shadow_below_median_db,
         ..InsarConfig::default()
     }
     .with_radar(&sar);
@@ -158,6 +164,13 @@ pub fn print_report(r: &InsarReport, out: &Path) {
         100.0 * a.eq20_layover_fraction,
         100.0 * a.eq20_shadow_fraction,
         100.0 * a.eq20_masked_fraction
+    );
+    println!(
+        "geometry   truth ray-traced layover {:.3} %, shadow {:.3} %; masked beyond it (> {} px) {:.3} %",
+        100.0 * a.geometric_layover_fraction,
+        100.0 * a.geometric_shadow_fraction,
+        ground_sim::insar::accuracy::GEOMETRY_MATCH_PX,
+        100.0 * a.masked_outside_geometry_fraction
     );
     let c = &r.coregistration;
     if let Some(chk) = &c.check {

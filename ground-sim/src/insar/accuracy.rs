@@ -9,10 +9,16 @@
 
 use serde::Serialize;
 
-use super::geocode::{eq20_fractions, label};
+use super::geocode::{eq20_fractions, label, ray_trace_mask};
 use super::pipeline::InsarProduct;
 use crate::dem::stats::slope_deg;
 use crate::dem::{Dem, DemError};
+
+/// How far (output pixels, Chebyshev) a masked pixel may lie from a truth pixel in geometric
+/// shadow or layover and still count as explained by the geometry: one pixel, because each
+/// pixel's height comes from a multilook window two output pixels wide, so a window centred
+/// next to a folded or hidden pixel already mixes its echo in.
+pub const GEOMETRY_MATCH_PX: usize = 1;
 
 /// Accuracy figures (the core of `report.json`).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
@@ -46,6 +52,15 @@ pub struct Accuracy {
     /// Of the truth pixels violating eq 20, the fraction masked in the product (within one
     /// pixel); 1 when there are none.
     pub eq20_masked_fraction: f64,
+    /// Truth pixels in geometric layover, ray-traced on the truth ([`ray_trace_mask`], no
+    /// tolerance): folded onto another pixel's slant range.
+    pub geometric_layover_fraction: f64,
+    /// Truth pixels in geometric shadow, ray-traced on the truth: hidden from the radar.
+    pub geometric_shadow_fraction: f64,
+    /// Pixels masked in the product (any code but valid or outside) farther than
+    /// [`GEOMETRY_MATCH_PX`] from every truth pixel in geometric shadow or layover, over the
+    /// truth's valid pixels: what the mask takes beyond the geometry (0 for a noise-free run).
+    pub masked_outside_geometry_fraction: f64,
     /// Pixels compared (heights).
     pub compared_pixels: usize,
     /// Height RMSE against the truth seen through the multilook window instead (a box of the
@@ -213,6 +228,33 @@ pub fn compare(
             }
         }
     }
+    let tz64: Vec<f64> = tz.iter().map(|&v| f64::from(v)).collect();
+    let traced = ray_trace_mask(&tz64, &[], &p.grid, p.geometry.a1_yz_m, f64::INFINITY);
+    let frac = |l: u8| {
+        traced
+            .iter()
+            .zip(&tz64)
+            .filter(|(t, z)| **t == l && z.is_finite())
+            .count() as f64
+            / truth_valid.max(1) as f64
+    };
+    let m = GEOMETRY_MATCH_PX;
+    let mut outside_geometry = 0usize;
+    for r in 0..h {
+        for c in 0..w {
+            let i = r * w + c;
+            if matches!(p.labels[i], label::VALID | label::OUTSIDE) || !tz64[i].is_finite() {
+                continue;
+            }
+            let near_geometry = (r.saturating_sub(m)..(r + m + 1).min(h)).any(|rr| {
+                (c.saturating_sub(m)..(c + m + 1).min(w))
+                    .any(|cc| traced[rr * w + cc] != label::VALID)
+            });
+            if !near_geometry {
+                outside_geometry += 1;
+            }
+        }
+    }
     let (height_rmse_window_matched_m, slope_rmse_window_matched_deg) = match window_truth {
         Some(t) => height_and_slope_rmse(&p.dem, t)?,
         None => (f64::NAN, f64::NAN),
@@ -238,6 +280,9 @@ pub fn compare(
         } else {
             viol_masked as f64 / viol as f64
         },
+        geometric_layover_fraction: frac(label::LAYOVER),
+        geometric_shadow_fraction: frac(label::SHADOW),
+        masked_outside_geometry_fraction: outside_geometry as f64 / truth_valid.max(1) as f64,
         compared_pixels: dh.len(),
     })
 }

@@ -337,6 +337,64 @@ pub fn eq20_mask(
     removed
 }
 
+/// Ray-traced radar visibility of a DEM on `grid`, row by row in the cross-track plane of a
+/// platform at `(track_y, track_z)` (m, SAR frame) looking towards `+y` (the SAR frame's look
+/// direction). Returns one label per cell: [`label::SHADOW`] where a nearer cell rises above the
+/// ray from the platform, [`label::LAYOVER`] where the cell's slant range is shared with another
+/// cell of its row (slant range not increasing with ground range: a foreslope steeper than the
+/// look angle and the cells it folds onto), [`label::VALID`] elsewhere and for non-finite heights
+/// (which neither block nor are labelled).
+///
+/// `tol_m` is a per-cell height uncertainty, m (0 for the truth): a cell blocks a ray only if it
+/// is above it by more than the two cells' tolerances, and two slant ranges count as shared only
+/// if they cross by more than that — so height noise of that size makes no shadow or layover.
+/// Unlike eq 20, which tests each cell's own slope, this also flags the cells a steep wall hides
+/// (shadow) or folds its echo onto (layover). Only cells within `reach_m` of ground range of
+/// each other are compared (the reach of the scene's highest wall, see
+/// `pipeline::fold_reach_m`; infinite for the truth), so one wrong height cannot mark a whole
+/// row. Cost: `O(width·height·reach/pixel)`.
+pub fn ray_trace_mask(
+    heights: &[f64],
+    tol_m: &[f64],
+    grid: &OutputGrid,
+    track_yz_m: [f64; 2],
+    reach_m: f64,
+) -> Vec<u8> {
+    let (w, h) = (grid.width, grid.height);
+    let [ty, tz] = track_yz_m;
+    let reach = if reach_m.is_finite() {
+        ((reach_m / grid.pixel_m).ceil().max(1.0) as usize).min(w)
+    } else {
+        w
+    };
+    let mut out = vec![label::VALID; w * h];
+    for r in 0..h {
+        let row = r * w;
+        let ok = |c: usize| heights[row + c].is_finite();
+        let tol = |c: usize| tol_m.get(row + c).copied().unwrap_or(0.0).max(0.0);
+        let range = |c: usize| (grid.y_m(c) - ty).hypot(tz - heights[row + c]);
+        // Look-angle tangent to the lowest and the highest point a cell certainly reaches.
+        let tan_lo = |c: usize| (grid.y_m(c) - ty) / (tz - heights[row + c] + tol(c));
+        let tan_hi = |c: usize| (grid.y_m(c) - ty) / (tz - heights[row + c] - tol(c));
+        for c in (0..w).filter(|&c| ok(c)) {
+            let (rc, e) = (range(c), tol(c));
+            let near = (c.saturating_sub(reach)..c).filter(|&q| ok(q));
+            // Shadow: an earlier cell subtends a larger look angle than this one's top.
+            if near.clone().any(|q| tan_lo(q) > tan_hi(c)) {
+                out[row + c] = label::SHADOW;
+            }
+            // Layover: an earlier cell is certainly farther, or a later one certainly nearer.
+            let far = (c + 1..(c + 1 + reach).min(w)).filter(|&q| ok(q));
+            if near.clone().any(|q| range(q) - tol(q) > rc + e)
+                || far.clone().any(|q| range(q) + tol(q) < rc - e)
+            {
+                out[row + c] = label::LAYOVER;
+            }
+        }
+    }
+    out
+}
+
 /// Truth-side eq 20: fraction of valid pixels of a DEM on `grid` that violate `γ < θ < 90° − γ`
 /// along the look direction, split into `(layover, shadow)`; plus the per-pixel flags.
 pub fn eq20_fractions(
@@ -464,5 +522,66 @@ mod tests {
         assert_eq!(labs[2], label::LAYOVER);
         assert_eq!(labs[7], label::SHADOW);
         assert!(lay > 0.2 && sha > 0.2);
+    }
+
+    #[test]
+    fn ray_tracing_finds_hidden_and_folded_cells_beyond_eq20() {
+        // θ ≈ 26° at 48.8 km ground range, 100 km up; 40 cells of 20 m.
+        let g = grid(40, 1, 20.0);
+        let track = [-48_773.0, 100_000.0];
+        let flat = vec![0.0f64; 40];
+        let none = vec![0.0f64; 40];
+        assert!(
+            ray_trace_mask(&flat, &none, &g, track, f64::INFINITY)
+                .iter()
+                .all(|&l| l == label::VALID)
+        );
+        // A 60 m cliff facing away at cell 10 (10 → 11): eq 20 flags only the cliff; the ray
+        // over its top (descending 2.05 m per metre) hides the next 29 m, i.e. cell 11 only.
+        let mut z = flat.clone();
+        for v in z.iter_mut().take(11) {
+            *v = 60.0;
+        }
+        let labs = ray_trace_mask(&z, &none, &g, track, f64::INFINITY);
+        assert_eq!(labs[11], label::SHADOW, "{labs:?}");
+        assert_eq!(labs[12], label::VALID, "{labs:?}");
+        assert_eq!(labs[5], label::VALID);
+        // With a ±40 m height tolerance nothing is certain any more.
+        let loose = vec![40.0f64; 40];
+        assert_eq!(
+            ray_trace_mask(&z, &loose, &g, track, f64::INFINITY)[11],
+            label::VALID
+        );
+        // A 100 m wall facing the radar between cells 20 and 21: cell 21's slant range is
+        // ≈ 90 m shorter than cell 20's, so it folds onto the ~10 cells before it.
+        let mut z = flat.clone();
+        for v in z.iter_mut().skip(21) {
+            *v = 100.0;
+        }
+        let labs = ray_trace_mask(&z, &none, &g, track, f64::INFINITY);
+        for c in [12, 15, 20, 21, 28, 30] {
+            assert_eq!(labs[c], label::LAYOVER, "cell {c}: {labs:?}");
+        }
+        assert_eq!(labs[5], label::VALID, "{labs:?}");
+        assert_eq!(labs[35], label::VALID, "{labs:?}");
+        // One wrong height (500 m too low at cell 5, ≈ 450 m too far in slant range) folds every
+        // later cell within 450 m of range onto itself; a 100 m reach confines it to 5 cells.
+        let mut z = flat.clone();
+        z[5] = -500.0;
+        assert_eq!(
+            ray_trace_mask(&z, &none, &g, track, f64::INFINITY)[30],
+            label::LAYOVER
+        );
+        let labs = ray_trace_mask(&z, &none, &g, track, 100.0);
+        assert_eq!(labs[8], label::LAYOVER, "{labs:?}");
+        assert_eq!(labs[30], label::VALID, "{labs:?}");
+        // NaN cells neither block nor get a label.
+        let mut z = flat.clone();
+        z[3] = f64::NAN;
+        assert!(
+            ray_trace_mask(&z, &none, &g, track, f64::INFINITY)
+                .iter()
+                .all(|&l| l == label::VALID)
+        );
     }
 }

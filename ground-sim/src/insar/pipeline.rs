@@ -10,7 +10,9 @@ use serde::Serialize;
 use super::coreg::{
     ResidualOffset, estimate_residual_offset, predicted_offset_gates, resample_range,
 };
-use super::geocode::{GeocodeParams, OutputGrid, RadarPixels, eq20_mask, geocode, label};
+use super::geocode::{
+    GeocodeParams, OutputGrid, RadarPixels, eq20_mask, geocode, label, ray_trace_mask,
+};
 use super::geometry::{PairGeometry, wrap_rad};
 use super::looks::{LookWindow, equivalent_looks_1d, multilook, phase_crlb_rad};
 use super::unwrap::unwrap_quality_guided;
@@ -30,7 +32,15 @@ pub struct InsarConfig {
     pub pixel_m: f64,
     /// Coherence below which a pixel's height is dropped (σ_h ≥ 25 m at 0.5 with 21 looks).
     pub min_coherence: f64,
-    /// Mean radar power this many dB below the scene median = no echo (shadow).
+    /// Height uncertainty allowed to the geometric masks, in units of each cell's Cramér–Rao
+    /// height bound: the ray tracing of shadow and layover on the generated DEM
+    /// ([`ray_trace_mask`]) only counts a cell as blocking or folding when it does so by more
+    /// than this many σ_h (of it and of the cell it is compared with), so height noise makes no
+    /// mask. Dark but coherent ground is never masked for being dark.
+    pub geometry_tolerance_sigmas: f64,
+    /// Mean radar power this many dB below the scene median = no echo, masked as shadow
+    /// (`f64::INFINITY` = never: masks by geometry and coherence only). Default 12 dB: without
+    /// it the chain keeps dark cells whose phase is another echo's (see docs/insar.md, "Masks").
     pub shadow_below_median_db: f64,
     /// Unwrap the flat-removed phase (quality-guided). Without it the phase is used wrapped.
     pub unwrap: bool,
@@ -60,6 +70,7 @@ impl Default for InsarConfig {
             window: LookWindow::default(),
             pixel_m: 20.0,
             min_coherence: 0.5,
+            geometry_tolerance_sigmas: 1.0,
             shadow_below_median_db: 12.0,
             unwrap: true,
             check_coregistration: true,
@@ -220,8 +231,10 @@ pub struct InsarProduct {
     pub unwrap: UnwrapReport,
     /// Mask fractions of the grid.
     pub mask: MaskFractions,
-    /// Pixels removed by the eq 20 test on the generated DEM.
+    /// Pixels removed by the eq 20 test on the generated DEM (after the ray tracing).
     pub eq20_removed: usize,
+    /// Pixels removed by the ray-traced shadow and layover of the generated DEM.
+    pub geometry_removed: usize,
     /// Mean coherence of all multilooked radar pixels.
     pub coherence_mean_radar: f64,
     /// Processing time, s.
@@ -279,7 +292,8 @@ pub fn process_pair(
     };
     let shadow_power = median_power * 10f64.powf(-cfg.shadow_below_median_db / 10.0);
 
-    // 3. Radar-geometry labels: no echo (shadow), then low coherence.
+    // 3. Radar-geometry labels: no echo (if that rule is on), then low coherence. Shadow and
+    //    layover proper come from the geometry (steps 6 and 7).
     let mut labels: Vec<u8> = (0..lo * co)
         .map(|i| {
             if power[i] <= shadow_power {
@@ -348,6 +362,51 @@ pub fn process_pair(
         }
     }
 
+    let positions = |z: &[f64], labels: &[u8], radii: &[usize]| -> Vec<f64> {
+        let mut gy = vec![0.0f64; lo * co];
+        for k in 0..lo {
+            for m in 0..co {
+                let mut zs = g.datum_m;
+                for &radius in radii {
+                    let (mut acc, mut n) = (0.0, 0.0);
+                    for kk in k.saturating_sub(radius)..(k + radius + 1).min(lo) {
+                        for mm in m.saturating_sub(radius)..(m + radius + 1).min(co) {
+                            let j = kk * co + mm;
+                            if labels[j] == label::VALID {
+                                acc += z[j];
+                                n += 1.0;
+                            }
+                        }
+                    }
+                    if n > 0.0 {
+                        zs = acc / n;
+                        break;
+                    }
+                }
+                gy[k * co + m] = g.ground_y_m(g.range_m(w.centre(m)), zs);
+            }
+        }
+        gy
+    };
+    // Radar pixels centred beyond the scene (the grid's extent, which is the DEM the radar
+    // saw) hold no ground of their own, only the scene edge's sidelobes: outside. Their own
+    // heights are wrong, so this test places them with the mean height of a 9×9 block (mostly
+    // pixels inside). It comes before the centroid correction, whose gradients they would spoil.
+    // The grid's cell edges, widened by the geocoding's own edge extension: a pixel that
+    // close still serves the outermost cells, as it did before this test.
+    let half = (0.5 + cfg.geocode.edge_px) * grid.pixel_m;
+    let (y_lo, y_hi) = (grid.y_m(0) - half, grid.y_m(grid.width.max(1) - 1) + half);
+    let (x_lo, x_hi) = (grid.x_m(0) - half, grid.x_m(grid.height.max(1) - 1) + half);
+    let gy0 = positions(&z, &labels, &[4, 8]);
+    for k in 0..lo {
+        let x = g.azimuth_m(w.centre(k));
+        for m in 0..co {
+            let i = k * co + m;
+            if !(x_lo..=x_hi).contains(&x) || !(y_lo..=y_hi).contains(&gy0[i]) {
+                labels[i] = label::OUTSIDE;
+            }
+        }
+    }
     // 5b. Speckle moves the point whose phase a window measures by 1–2 samples from its centre
     //     (the |A1·A2|-weighted centroid); on a slope that is a height error of slope × offset,
     //     the largest error of the noise-free chain. Move each height back to its window centre
@@ -369,44 +428,33 @@ pub fn process_pair(
     //    otherwise jitter positions by twice its size and fold neighbours over each other.
     //    Masked pixels (whose own height is unreliable) take the mean of the nearest valid
     //    ones, searching up to 8 pixels away, else the datum.
-    let mut gy = vec![0.0f64; lo * co];
-    for k in 0..lo {
-        for m in 0..co {
-            let mut zs = g.datum_m;
-            for radius in [1usize, 2, 4, 8] {
-                let (mut acc, mut n) = (0.0, 0.0);
-                for kk in k.saturating_sub(radius)..(k + radius + 1).min(lo) {
-                    for mm in m.saturating_sub(radius)..(m + radius + 1).min(co) {
-                        let j = kk * co + mm;
-                        if labels[j] == label::VALID {
-                            acc += z[j];
-                            n += 1.0;
-                        }
-                    }
-                }
-                if n > 0.0 {
-                    zs = acc / n;
-                    break;
-                }
-            }
-            gy[k * co + m] = g.ground_y_m(g.range_m(w.centre(m)), zs);
-        }
-    }
+    let mut gy = positions(&z, &labels, &[1, 2, 4, 8]);
     // Folds (a pixel nearer on the ground than one before it by more than a quarter of the
     // nominal ground spacing) are layover; smaller reversals are noise and are clamped so that
     // each line's positions never decrease.
-    let fold_tol = 0.25 * g.range_spacing_m * w.step as f64 / g.flat_look_angle_rad(centre_r).sin();
+    let theta_c = g.flat_look_angle_rad(centre_r);
+    let fold_tol = 0.25 * g.range_spacing_m * w.step as f64 / theta_c.sin();
+    // A fold reaches no further than a wall as high as the scene's height span can throw its
+    // echo: span / tan θ on the ground. Comparing only within that reach keeps one pixel with a
+    // wrong height (an unwrapping error) from marking the rest of its line.
+    let reach_m = fold_reach_m(&z, &labels, theta_c);
+    let ml_ground_m = g.range_spacing_m * w.step as f64 / theta_c.sin();
+    let reach_px = (reach_m / ml_ground_m).ceil().max(1.0) as usize;
     for k in 0..lo {
         let row = k * co;
-        let mut run_max = f64::NEG_INFINITY;
         for m in 0..co {
             let i = row + m;
             if labels[i] != label::VALID {
                 continue;
             }
+            let run_max = (m.saturating_sub(reach_px)..m)
+                .map(|mm| row + mm)
+                .filter(|&j| labels[j] == label::VALID)
+                .map(|j| gy[j])
+                .fold(f64::NEG_INFINITY, f64::max);
             if gy[i] < run_max - fold_tol {
                 labels[i] = label::LAYOVER;
-                for mm in (0..m).rev() {
+                for mm in (m.saturating_sub(reach_px)..m).rev() {
                     let j = row + mm;
                     if gy[j] > gy[i] {
                         labels[j] = label::LAYOVER;
@@ -416,7 +464,6 @@ pub fn process_pair(
                 }
             } else {
                 gy[i] = gy[i].max(run_max);
-                run_max = gy[i];
             }
         }
     }
@@ -434,6 +481,30 @@ pub fn process_pair(
     let geo = geocode(&radar, &[&z, &coh64, &sig], grid, &cfg.geocode);
     let mut out_labels = geo.labels;
     let mut heights = geo.channels[0].clone();
+    // Shadow and layover ray-traced on the generated DEM smoothed by one output pixel
+    // (NaN-aware), tolerating the cells' own height bound so that pixel-scale height noise
+    // neither blocks rays nor folds ranges; then eq 20 on the DEM itself, as the paper.
+    let smooth = gaussian_filter(&heights, grid.width, grid.height, 1.0);
+    let tol: Vec<f64> = geo.channels[2]
+        .iter()
+        .map(|&s| {
+            if s.is_finite() {
+                s * cfg.geometry_tolerance_sigmas
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    let traced = ray_trace_mask(&smooth, &tol, grid, g.a1_yz_m, reach_m);
+    let mut geometry_removed = 0;
+    for (l, &t) in out_labels.iter_mut().zip(&traced) {
+        if t != label::VALID {
+            if *l == label::VALID {
+                geometry_removed += 1;
+            }
+            *l = label::worst(*l, t);
+        }
+    }
     let eq20_removed = eq20_mask(&heights, &mut out_labels, grid, g.a1_yz_m);
     for (h, &l) in heights.iter_mut().zip(&out_labels) {
         if l != label::VALID {
@@ -491,9 +562,31 @@ pub fn process_pair(
         unwrap,
         mask,
         eq20_removed,
+        geometry_removed,
         coherence_mean_radar,
         seconds: t0.elapsed().as_secs_f64(),
     })
+}
+
+/// Ground distance, m, over which layover or shadow can act in a scene whose valid heights
+/// (`labels` = [`label::VALID`]) span `p98 − p2` (percentiles, so a few wrong heights do not
+/// count): a wall that high, seen at look angle `theta_rad`, folds its echo over at most
+/// `span·cot θ` of ground and casts a shadow at most `span·tan θ` long. At least 100 m.
+pub fn fold_reach_m(z: &[f64], labels: &[u8], theta_rad: f64) -> f64 {
+    let mut v: Vec<f64> = z
+        .iter()
+        .zip(labels)
+        .filter(|(h, l)| **l == label::VALID && h.is_finite())
+        .map(|(h, _)| *h)
+        .collect();
+    if v.is_empty() {
+        return 100.0;
+    }
+    v.sort_by(f64::total_cmp);
+    let q = |p: f64| v[((v.len() - 1) as f64 * p).round() as usize];
+    let span = q(0.98) - q(0.02);
+    let t = theta_rad.tan();
+    (span * t.max(1.0 / t)).max(100.0)
 }
 
 /// Heights `z` (row-major, `cols` per line) measured at the window centroids `centroid`

@@ -85,6 +85,8 @@ pub struct InsarReport {
     pub mask: MaskFractions,
     /// Pixels removed by the eq 20 test on the generated DEM.
     pub eq20_removed_pixels: usize,
+    /// Pixels removed by the ray-traced shadow and layover of the generated DEM.
+    pub geometry_removed_pixels: usize,
     /// Output grid size and pixel.
     pub grid: [f64; 3],
     /// Pair geometry.
@@ -338,6 +340,7 @@ pub fn write_outputs(
         unwrap: p.unwrap,
         mask: p.mask,
         eq20_removed_pixels: p.eq20_removed,
+        geometry_removed_pixels: p.geometry_removed,
         grid: [w as f64, h as f64, p.grid.pixel_m],
         geometry: p.geometry,
         config: p.config,

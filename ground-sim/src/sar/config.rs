@@ -6,6 +6,35 @@ use serde::{Deserialize, Serialize};
 use super::scattering::TwoScaleModel;
 use super::{SPEED_OF_LIGHT_M_S, SarError, SarResult};
 
+/// Baseline of the [`RadarPreset::Mission`] design, m: four times the paper's 8 m, so the
+/// height of ambiguity is ≈ 183 m per 2π instead of ≈ 733 m and the height noise of a given
+/// coherence a quarter. The shortest of the baselines measured (8, 16, 24, 32 m) that keeps
+/// height RMSE ≤ 3 m and slope RMSE ≤ 3° on the floor scenes at NESZ −25 dB (docs/insar.md,
+/// "Radar design under NESZ −25 dB"); a boom of that length has flown (SRTM's 60 m mast).
+pub const MISSION_BASELINE_M: f64 = 32.0;
+
+/// Named radar designs. Both keep every parameter of the paper but the baseline.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum RadarPreset {
+    /// The paper's radar: 8 m baseline tilted 30° (height of ambiguity ≈ 733 m).
+    Paper,
+    /// The mission design: the paper's radar with a [`MISSION_BASELINE_M`] boom.
+    Mission,
+}
+
+impl RadarPreset {
+    /// The preset's configuration: the paper's [`SarConfig::default`] with the preset's
+    /// baseline (thermal noise as the default's; the commands choose it).
+    pub fn config(self) -> SarConfig {
+        let mut c = SarConfig::default();
+        if self == RadarPreset::Mission {
+            c.baseline_m = MISSION_BASELINE_M;
+        }
+        c
+    }
+}
+
 /// Polarisation channel: transmit and receive both horizontal, or both vertical.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
 pub enum Polarisation {
@@ -187,6 +216,20 @@ impl SarConfig {
     /// Load from a TOML string; absent keys keep the defaults.
     pub fn from_toml_str(text: &str) -> SarResult<Self> {
         let cfg: SarConfig = toml::from_str(text).map_err(|e| SarError::Config(e.to_string()))?;
+        cfg.validate()?;
+        Ok(cfg)
+    }
+
+    /// Like [`SarConfig::from_toml_str`], but keys missing from `text` keep the values of
+    /// `base` (e.g. a [`RadarPreset`]) instead of the paper's defaults.
+    pub fn from_toml_str_over(text: &str, base: SarConfig) -> SarResult<Self> {
+        let err = |e: String| SarError::Config(e);
+        let mut table = toml::Table::try_from(&base).map_err(|e| err(e.to_string()))?;
+        let over: toml::Table = toml::from_str(text).map_err(|e| err(e.to_string()))?;
+        table.extend(over);
+        let cfg: SarConfig = table
+            .try_into()
+            .map_err(|e: toml::de::Error| err(e.to_string()))?;
         cfg.validate()?;
         Ok(cfg)
     }

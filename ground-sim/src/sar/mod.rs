@@ -51,7 +51,7 @@ pub mod slc;
 #[cfg(test)]
 mod tests;
 
-pub use config::{Derived, Polarisation, SarConfig};
+pub use config::{Derived, MISSION_BASELINE_M, Polarisation, RadarPreset, SarConfig};
 pub use geometry::{AcquisitionPlan, Antenna, Geometry, SarDem};
 pub use pipeline::{InsarPair, simulate_insar_pair};
 pub use slc::Slc;
