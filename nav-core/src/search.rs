@@ -54,6 +54,11 @@ pub const MAX_SCALES: usize = 3;
 /// Peaks kept from the coarse level.
 pub const MAX_CANDIDATES: usize = 3;
 
+/// Largest prior scale the search accepts, tile pixels per (binned) frame pixel.
+pub const MAX_PRIOR_SCALE: f32 = 100.0;
+/// Largest prior centre coordinate the search accepts, tile pixels.
+pub const MAX_PRIOR_COORD_PX: f32 = 1.0e7;
+
 /// Search settings.
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -108,8 +113,9 @@ pub enum SearchError {
     Disabled,
     /// The tile carries no slope raster.
     NoRaster,
-    /// The prior's heading σ exceeds [`SearchConfig::max_heading_sigma_rad`], or its scale is
-    /// not positive.
+    /// The prior's heading σ exceeds [`SearchConfig::max_heading_sigma_rad`], or a prior value
+    /// is not finite or out of range (scale not in (0, [`MAX_PRIOR_SCALE`]], centre beyond
+    /// [`MAX_PRIOR_COORD_PX`]).
     PriorTooWide,
     /// Too few valid frame samples, or a textureless frame.
     FlatFrame,
@@ -299,11 +305,15 @@ pub fn search(
     }
     let k = bin.max(1) as f32;
     let scale0 = prior.scale * k;
+    // Bounded inputs keep every raster coordinate well inside `i32` (frame sides ≤ 2¹⁴ px).
     if !(prior.heading_sigma_rad.abs() <= cfg.max_heading_sigma_rad
         && scale0 > 0.0
-        && scale0.is_finite()
+        && scale0 <= MAX_PRIOR_SCALE
         && prior.sigma_px.is_finite()
-        && prior.center_tile_px.iter().all(|v| v.is_finite())
+        && prior
+            .center_tile_px
+            .iter()
+            .all(|v| v.abs() <= MAX_PRIOR_COORD_PX)
         && prior.heading_rad.is_finite()
         && prior.scale_sigma.is_finite())
     {
@@ -805,6 +815,14 @@ mod tests {
             },
             Prior {
                 sigma_px: f32::INFINITY,
+                ..prior
+            },
+            Prior {
+                center_tile_px: [3.0e9, -3.0e9],
+                ..prior
+            },
+            Prior {
+                scale: 1.0e6,
                 ..prior
             },
         ] {

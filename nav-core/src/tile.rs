@@ -246,7 +246,9 @@ impl SlopeRaster<'_> {
     /// Pixel at `(col, row)`; [`SLOPE_NODATA`] outside.
     #[inline]
     pub fn get(&self, col: usize, row: usize) -> SlopePx {
-        if col >= self.width {
+        // Both checked before the index arithmetic, which could otherwise wrap for a row far
+        // outside.
+        if col >= self.width || row >= self.height {
             return SLOPE_NODATA;
         }
         rd_u16(self.bytes, 2 * (row * self.width + col)).map_or(SLOPE_NODATA, SlopePx::from_bits)
