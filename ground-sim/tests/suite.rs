@@ -9,9 +9,7 @@ use std::path::Path;
 use std::process::{Command, Output};
 
 use ground_sim::evaluation::navmap::{NavMap, NavmapThresholds};
-use ground_sim::reference::{
-    Smoothing, load, reference_dem, reference_surf_config, write_reference,
-};
+use ground_sim::reference::{Smoothing, load, reference_dem, surf_config_for, write_reference};
 use ground_sim::terrain::{Preset, TerrainParams, generate};
 use indicatif::ProgressBar;
 use nav_core::Tile;
@@ -133,7 +131,12 @@ fn navmap_footprint_sums_match_a_brute_force_count() {
     write_reference(
         &r,
         dir.path(),
-        &reference_surf_config(),
+        &surf_config_for(
+            &ground_sim::reference::noise_floor::FrameNoise::default_sensor(),
+            20.0,
+            ground_sim::reference::DEFAULT_SMOOTHING_M,
+        )
+        .unwrap(),
         1000,
         Smoothing::default_for_truth(),
     )

@@ -528,7 +528,7 @@ fn insar_section(
     writeln!(md, "\n## Against the InSAR reference (the product)\n")?;
     writeln!(
         md,
-        "Each preset through `ground-sim insar` (SAR echoes, focusing, interferogram, DEM at 20 m, tile with 50 m terrain smoothing and detector threshold 0.003, `ground_sim::reference::INSAR_*`; radar without thermal noise, the paper's echo model), then the Fig. 7 frames and an `eval` campaign (same seed and frames as above) against that tile. Frames still come from the truth DEM, as the flyer's sensor sees the real terrain.\n"
+        "Each preset through `ground-sim insar` (SAR echoes, focusing, interferogram, DEM at 20 m, tile with 50 m terrain smoothing (`ground_sim::reference::INSAR_SMOOTHING_M`) and the detector threshold of every tile, twice the sensor's noise floor (`ground_sim::reference::noise_floor`); radar without thermal noise, the paper's echo model), then the Fig. 7 frames and an `eval` campaign (same seed and frames as above) against that tile. Frames still come from the truth DEM, as the flyer's sensor sees the real terrain.\n"
     )?;
     let mut dem_rows = String::new();
     let mut case_rows = String::new();

@@ -6,9 +6,11 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use ground_sim::dem::read_geotiff;
+use ground_sim::reference::noise_floor::FrameNoise;
 use ground_sim::reference::tile::MAX_TILE_FEATURES;
-use ground_sim::reference::{DEFAULT_SMOOTHING_M, Smoothing, reference_dem, write_reference};
-use nav_core::{DetectorConfig, SurfConfig};
+use ground_sim::reference::{
+    DEFAULT_SMOOTHING_M, Smoothing, reference_dem, surf_config_for, write_reference,
+};
 
 /// Arguments of `ground-sim tile`.
 #[derive(Debug, clap::Args)]
@@ -22,9 +24,17 @@ pub struct Args {
     /// Output folder.
     #[arg(long)]
     pub out: PathBuf,
-    /// Detector threshold, (degrees of slope)².
-    #[arg(long, default_value_t = ground_sim::reference::DEFAULT_THRESHOLD)]
-    pub threshold: f32,
+    /// Detector threshold, (degrees of slope)². Default: twice the noise floor of the flyer's
+    /// frames (`--frame-noise-m`, `--frame-pixel-m`; `ground_sim::reference::noise_floor`), so
+    /// the tile and the frames keep every blob the sensor can tell from noise.
+    #[arg(long)]
+    pub threshold: Option<f32>,
+    /// 1σ range (height) noise of the flyer's frames, metres: sets the default threshold.
+    #[arg(long, default_value_t = FrameNoise::default_sensor().height_sigma_m)]
+    pub frame_noise_m: f64,
+    /// Ground pixel of the flyer's frames, metres: sets the default threshold.
+    #[arg(long, default_value_t = FrameNoise::default_sensor().pixel_m)]
+    pub frame_pixel_m: f64,
     /// Terrain smoothing, metres: Gaussian σ applied to the reference DEM before slope and
     /// recorded in the tile, so the flyer smooths its frames alike (0 = none). At most 3
     /// reference pixels.
@@ -46,13 +56,18 @@ pub struct Args {
 pub fn run(a: &Args) -> anyhow::Result<()> {
     let dem = read_geotiff(&a.dem).with_context(|| format!("reading {}", a.dem.display()))?;
     let r = reference_dem(&dem, a.pixel_m)?;
-    let cfg = SurfConfig {
-        detector: DetectorConfig {
-            threshold: a.threshold,
-            ..Default::default()
-        },
-        upright: false,
+    let noise = FrameNoise {
+        pixel_m: a.frame_pixel_m,
+        height_sigma_m: a.frame_noise_m,
+        ..FrameNoise::default_sensor()
     };
+    let mut cfg = surf_config_for(&noise, a.pixel_m, a.smoothing_m)?;
+    if let Some(t) = a.threshold {
+        if !(t.is_finite() && t >= 0.0) {
+            anyhow::bail!("--threshold must be finite and >= 0, got {t}");
+        }
+        cfg.detector.threshold = t;
+    }
     let s = write_reference(
         &r,
         &a.out,
@@ -64,11 +79,12 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         },
     )?;
     println!(
-        "reference  {}x{} px at {} m, smoothing σ {} m: {} features, {} bytes -> {}",
+        "reference  {}x{} px at {} m, smoothing σ {} m, threshold {:.3e} deg²: {} features, {} bytes -> {}",
         s.width_px,
         s.height_px,
         s.pixel_m,
         s.smoothing_m,
+        s.threshold,
         s.features,
         s.tile_bytes,
         a.out.display()

@@ -23,8 +23,11 @@ use crate::insar::InsarConfig;
 use crate::insar::pipeline::run_from_dem;
 use crate::insar::products::{RunContext, SarSummary, write_outputs};
 use crate::pictures::render::{GLYPH, draw_text};
+use crate::reference::noise_floor::FrameNoise;
 use crate::reference::tile::MAX_TILE_FEATURES;
-use crate::reference::{Smoothing, reference_dem, reference_surf_config, write_reference};
+use crate::reference::{
+    DEFAULT_SMOOTHING_M, Smoothing, reference_dem, surf_config_for, write_reference,
+};
 use crate::sar::{Polarisation, SarConfig};
 use crate::terrain::{Preset, TerrainParams, Window, generate};
 
@@ -289,10 +292,15 @@ pub fn run_scene(
         let features = match kind {
             TileKind::Truth => {
                 let r = reference_dem(&dem, spec.reference_pixel_m)?;
+                let surf = surf_config_for(
+                    &FrameNoise::default_sensor(),
+                    spec.reference_pixel_m,
+                    DEFAULT_SMOOTHING_M,
+                )?;
                 write_reference(
                     &r,
                     &tdir,
-                    &reference_surf_config(),
+                    &surf,
                     MAX_TILE_FEATURES,
                     Smoothing::default_for_truth(),
                 )?

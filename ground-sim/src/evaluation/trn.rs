@@ -76,6 +76,13 @@ pub struct TrnScore {
     /// Error of the frame centre, metres.
     #[serde(with = "crate::evaluation::shard::opt_f64")]
     pub pos_err_m: Option<f64>,
+    /// Error of the fix's geo centre along the projection's x (east), metres (fix − truth):
+    /// with `err_north_m`, shows whether errors share a direction (a map offset) or scatter.
+    #[serde(default, with = "crate::evaluation::shard::opt_f64")]
+    pub err_east_m: Option<f64>,
+    /// Error of the fix's geo centre along the projection's y (north), metres (fix − truth).
+    #[serde(default, with = "crate::evaluation::shard::opt_f64")]
+    pub err_north_m: Option<f64>,
     /// Reported 1σ of the centre, metres (the larger principal axis of its covariance).
     #[serde(with = "crate::evaluation::shard::opt_f64")]
     pub center_sigma_m: Option<f64>,
@@ -175,6 +182,8 @@ fn fill_fix(
     s.center_sigma_m = Some(big.max(0.0).sqrt());
     // The pose is the frame centre's true geo position.
     let (ex, ey) = (f.center_geo_m[0] - pose.x_m, f.center_geo_m[1] - pose.y_m);
+    s.err_east_m = Some(ex);
+    s.err_north_m = Some(ey);
     // eᵀ C⁻¹ e with the 2 × 2 inverse written out; a singular covariance gives no figure.
     s.nees = (det > 0.0)
         .then(|| (c[1][1] * ex * ex - (c[0][1] + c[1][0]) * ex * ey + c[0][0] * ey * ey) / det);

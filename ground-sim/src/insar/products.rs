@@ -134,10 +134,15 @@ pub fn write_outputs(
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let truth_grid = &truth.grid;
     let accuracy = compare(p, truth_grid, Some(&truth.window))?;
+    let surf = crate::reference::surf_config_for(
+        &crate::reference::noise_floor::FrameNoise::default_sensor(),
+        p.dem.pixel_m()?,
+        crate::reference::INSAR_SMOOTHING_M,
+    )?;
     let tile = write_reference(
         &p.dem,
         dir,
-        &crate::reference::insar_surf_config(),
+        &surf,
         MAX_TILE_FEATURES,
         Smoothing {
             target_m: crate::reference::INSAR_SMOOTHING_M,
