@@ -163,10 +163,10 @@ pub struct Fix {
     /// RMS transfer error of the inliers, tile pixels.
     pub residual_rms_px: f64,
     /// Whether `affine` (and everything derived from it) comes from the dense refinement over
-    /// the frame's pixels ([`crate::refine`]) rather than from the feature inliers alone. The
-    /// covariances stay those of the feature fix: an upper bound for the refined estimate, and
-    /// the one that measured consistent in closed loop (the refinement's own statistical
-    /// covariance is in [`crate::refine::Refined`]; see `docs/registration.md`).
+    /// the frame's pixels ([`crate::refine`]) rather than from the feature inliers alone. A
+    /// refined fix's covariances are the refinement's (inflated for correlated residuals) plus
+    /// the tile's reference error; an unrefined one's come from a handful of inlier residuals
+    /// and are the less trustworthy (`docs/registration.md`, Covariance).
     pub refined: bool,
     /// The fix comes from the prior-aided area search ([`crate::search`]) and its refinement,
     /// not from feature matches: `inliers` and `residual_rms_px` are 0, and the covariances
@@ -175,9 +175,9 @@ pub struct Fix {
 }
 
 impl Fix {
-    /// The same fix with a refined transform: position, heading, rotation and scale follow the
-    /// refinement; the gate figures (`non_similar`, residual, inliers) and the covariances stay
-    /// those of the feature fix.
+    /// The same fix with a refined transform: position, heading, rotation, scale and their
+    /// covariances follow the refinement (plus the tile's reference error); the gate figures
+    /// (`non_similar`, residual, inliers) stay those of the feature fix.
     pub fn with_refinement(
         &self,
         r: &crate::refine::Refined,
@@ -195,6 +195,7 @@ impl Fix {
         if heading < 0.0 {
             heading += core::f64::consts::TAU;
         }
+        let (cov_px, cov_m) = with_reference_error(r.center_cov_tile_px2, header);
         Self {
             affine,
             similarity: Similarity {
@@ -204,15 +205,36 @@ impl Fix {
             center_tile_px: [tx, ty],
             center_geo_m: [gx, gy],
             heading_rad: heading,
+            center_cov_tile_px2: cov_px,
+            center_cov_geo_m2: cov_m,
+            heading_sigma_rad: r.rotation_sigma_rad,
+            scale_sigma: r.scale_sigma,
             refined: true,
             ..*self
         }
     }
 }
 
+/// A centre covariance in tile pixels² plus the tile's reference error
+/// ([`TileHeader::reference_sigma_m`]), in tile pixels² and in geo metres² (the geo axes are
+/// the tile axes scaled by the signed pixel sizes).
+pub fn with_reference_error(
+    c: [[f64; 2]; 2],
+    header: &TileHeader<'_>,
+) -> ([[f64; 2]; 2], [[f64; 2]; 2]) {
+    let [vx, vy] = header.reference_var_px2();
+    let c = [[c[0][0] + vx, c[0][1]], [c[1][0], c[1][1] + vy]];
+    let (px, py) = (header.pixel_x_m, header.pixel_y_m);
+    let m = [
+        [c[0][0] * px * px, c[0][1] * px * py],
+        [c[1][0] * px * py, c[1][1] * py * py],
+    ];
+    (c, m)
+}
+
 impl Fix {
     /// A fix from a refined area-search alignment: transform, position and heading from the
-    /// refinement, covariances from its Gauss–Newton model.
+    /// refinement, covariances from its Gauss–Newton model plus the tile's reference error.
     pub fn from_area_search(
         r: &crate::refine::Refined,
         header: &TileHeader<'_>,
@@ -223,8 +245,7 @@ impl Fix {
         let (cx, cy) = ((frame_w as f64 - 1.0) * 0.5, (frame_h as f64 - 1.0) * 0.5);
         let (tx, ty) = r.affine.apply(cx, cy);
         let (gx, gy) = header.pixel_to_geo(tx, ty);
-        let (ax, ay) = (libm::fabs(header.pixel_x_m), libm::fabs(header.pixel_y_m));
-        let c = r.center_cov_tile_px2;
+        let (c, cm) = with_reference_error(r.center_cov_tile_px2, header);
         let mut heading = sim.rotation_rad;
         if heading < 0.0 {
             heading += core::f64::consts::TAU;
@@ -236,17 +257,7 @@ impl Fix {
             center_geo_m: [gx, gy],
             heading_rad: heading,
             center_cov_tile_px2: c,
-            // Geo axes are the tile axes scaled by the (signed) pixel sizes.
-            center_cov_geo_m2: [
-                [
-                    c[0][0] * ax * ax,
-                    c[0][1] * header.pixel_x_m * header.pixel_y_m,
-                ],
-                [
-                    c[1][0] * header.pixel_x_m * header.pixel_y_m,
-                    c[1][1] * ay * ay,
-                ],
-            ],
+            center_cov_geo_m2: cm,
             heading_sigma_rad: r.rotation_sigma_rad,
             scale_sigma: r.scale_sigma,
             inliers: 0,
@@ -313,7 +324,7 @@ pub fn make_fix(
     let (tx, ty) = r.affine.apply(cx, cy);
     let (gx, gy) = header.pixel_to_geo(tx, ty);
     let var_px = r.sigma2_px2 * r.design.point_variance(cx, cy);
-    let (ax, ay) = (libm::fabs(header.pixel_x_m), libm::fabs(header.pixel_y_m));
+    let (cov_px, cov_m) = with_reference_error([[var_px, 0.0], [0.0, var_px]], header);
     let var_ab = r.sigma2_px2 * r.design.rotation_scale_variance();
     let mut heading = sim.rotation_rad;
     if heading < 0.0 {
@@ -328,8 +339,8 @@ pub fn make_fix(
         center_tile_px: [tx, ty],
         center_geo_m: [gx, gy],
         heading_rad: heading,
-        center_cov_tile_px2: [[var_px, 0.0], [0.0, var_px]],
-        center_cov_geo_m2: [[var_px * ax * ax, 0.0], [0.0, var_px * ay * ay]],
+        center_cov_tile_px2: cov_px,
+        center_cov_geo_m2: cov_m,
         heading_sigma_rad: libm::sqrt(var_ab) / sim.scale.max(f64::MIN_POSITIVE),
         scale_sigma: libm::sqrt(var_ab),
         inliers: r.inliers,

@@ -130,11 +130,9 @@ pub struct Refined {
     /// Covariance of the frame centre, tile pixels² (row-major 2 × 2): the Gauss–Newton
     /// covariance σ²·H⁻¹ of the final pass, inflated for residuals correlated between
     /// neighbouring samples (see [`Refined::correlation`]). It describes the alignment noise
-    /// only, not errors of the reference itself (an InSAR DEM's local height errors shift the
-    /// whole frame alike); measured on 500-frame campaigns (seed 1, `eval`'s
-    /// `refined_nees_mean`): mean NEES 0.64 / 0.70 against the truth-built shoemaker /
-    /// shackleton tiles, 7.7 / 2.3 against their InSAR tiles (2 is consistent). The fix keeps
-    /// the feature covariance.
+    /// only, not errors of the reference itself (an InSAR DEM's errors shift the whole frame
+    /// alike): the fix adds the tile's `reference_sigma_m` to it
+    /// ([`crate::pose::with_reference_error`]; measured in `docs/registration.md`, Covariance).
     pub center_cov_tile_px2: [[f64; 2]; 2],
     /// Standard deviation of the rotation, radians (same model).
     pub rotation_sigma_rad: f64,
@@ -574,6 +572,7 @@ mod tests {
             min_scale_px: 0.0,
             upright: false,
             smoothing_m: 0.0,
+            reference_sigma_m: [0.0; 2],
         };
         let mut buf = vec![0u8; tile_len_with_raster(512, 0, W * W)];
         let n = write_tile_with_raster(&header, &[], raster, &mut buf).unwrap();

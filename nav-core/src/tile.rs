@@ -28,7 +28,7 @@ use serde::{Deserialize, Serialize};
 /// Magic bytes at offset 0.
 pub const TILE_MAGIC: [u8; 8] = *b"UMBRATIL";
 /// Format version this code reads and writes.
-pub const TILE_FORMAT_VERSION: u16 = 3;
+pub const TILE_FORMAT_VERSION: u16 = 4;
 /// Bytes before the header.
 pub const PREAMBLE_LEN: usize = 20;
 /// Most raster pixels a tile may hold (a 16 384² map; 512 MiB, far beyond any flash).
@@ -88,10 +88,19 @@ pub struct TileHeader<'a> {
     /// The flyer smooths its frames by the same σ before slope, so both sides see the same
     /// terrain and their keypoints land alike. 0 = none; at most [`MAX_SMOOTHING_M`].
     pub smoothing_m: f32,
+    /// The map's own horizontal error: 1σ, metres, along the tile's x (column) and y (row)
+    /// axes, of where a frame registered on this tile lands relative to the true ground, for
+    /// reasons the frame cannot see (the reference DEM's resolution and processing, e.g. an
+    /// InSAR DEM's multilook blur that frames do not share). It moves a whole frame alike, so
+    /// it never shows in a fix's residuals; every fix adds it to its covariance. 0 = none
+    /// claimed; at most [`MAX_REFERENCE_SIGMA_M`].
+    pub reference_sigma_m: [f32; 2],
 }
 
 /// Largest [`TileHeader::smoothing_m`] accepted, metres.
 pub const MAX_SMOOTHING_M: f32 = 10_000.0;
+/// Largest [`TileHeader::reference_sigma_m`] accepted, metres.
+pub const MAX_REFERENCE_SIGMA_M: f32 = 10_000.0;
 
 impl TileHeader<'_> {
     /// The SURF settings the tile was built with (frames should use the same).
@@ -116,6 +125,25 @@ impl TileHeader<'_> {
     /// Mean ground sample distance, metres per pixel.
     pub fn pixel_m(&self) -> f64 {
         0.5 * (libm::fabs(self.pixel_x_m) + libm::fabs(self.pixel_y_m))
+    }
+    /// [`Self::reference_sigma_m`] as variances in tile pixels², `[x, y]`.
+    pub fn reference_var_px2(&self) -> [f64; 2] {
+        let v = |s: f32, px: f64| {
+            let s = s as f64 / libm::fabs(px);
+            s * s
+        };
+        [
+            v(self.reference_sigma_m[0], self.pixel_x_m),
+            v(self.reference_sigma_m[1], self.pixel_y_m),
+        ]
+    }
+    /// Whether the header's own fields are in range (shared by the parser and the writer).
+    fn ranges_ok(&self) -> bool {
+        let sigma_ok = |s: f32| (0.0..=MAX_REFERENCE_SIGMA_M).contains(&s);
+        self.projection.len() <= MAX_PROJECTION_LEN
+            && (0.0..=MAX_SMOOTHING_M).contains(&self.smoothing_m)
+            && sigma_ok(self.reference_sigma_m[0])
+            && sigma_ok(self.reference_sigma_m[1])
     }
 }
 
@@ -323,9 +351,8 @@ impl<'a> Tile<'a> {
             || !finite_nz(header.pixel_y_m)
             || !header.origin_x_m.is_finite()
             || !header.origin_y_m.is_finite()
-            || header.projection.len() > MAX_PROJECTION_LEN
+            || !header.ranges_ok()
             || !detector_ok
-            || !(0.0..=MAX_SMOOTHING_M).contains(&header.smoothing_m)
             || (raster_px != 0
                 && Some(raster_px)
                     != (header.width_px as usize).checked_mul(header.height_px as usize))
@@ -476,9 +503,7 @@ pub fn write_tile_with_raster(
     {
         return Err(TileError::BadGeometry);
     }
-    if header.projection.len() > MAX_PROJECTION_LEN
-        || !(0.0..=MAX_SMOOTHING_M).contains(&header.smoothing_m)
-    {
+    if !header.ranges_ok() {
         return Err(TileError::BadGeometry);
     }
     let n = features.len();

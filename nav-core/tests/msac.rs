@@ -29,6 +29,7 @@ const HEADER: TileHeader<'static> = TileHeader {
     min_scale_px: 0.0,
     upright: false,
     smoothing_m: 0.0,
+    reference_sigma_m: [0.0; 2],
 };
 
 /// `n_true` correspondences of X = 0.5·R(θ)·x + t with 0.3 px noise, plus `n_out` random pairs.
@@ -150,4 +151,49 @@ fn fewer_than_three_true_matches_never_fix() {
     }
     println!("600 trials with < 3 true matches: no-fix reasons {reasons:?}");
     assert_eq!(fixes, 0);
+}
+
+/// The tile's reference error adds to the fix covariance exactly, per axis, in tile px² and m²;
+/// with none claimed the covariance is the residuals' alone.
+#[test]
+fn reference_error_adds_to_the_fix_covariance() {
+    let cfg = MsacConfig::default();
+    let pts = scene(11, 30, 10, 0.4);
+    let mut inl = vec![false; pts.len()];
+    let r = msac(&pts, &mut inl, &cfg).expect("consensus");
+    let fix_with = |h: &TileHeader<'_>| {
+        make_fix(
+            &r,
+            h,
+            200,
+            200,
+            &GateConfig::default(),
+            pts.iter()
+                .zip(&inl)
+                .filter(|(_, f)| **f)
+                .map(|(p, _)| (p.x, p.y)),
+        )
+        .expect("fix")
+    };
+    let bare = fix_with(&HEADER);
+    let claimed = TileHeader {
+        reference_sigma_m: [3.0, 4.0],
+        ..HEADER
+    };
+    let with = fix_with(&claimed);
+    // 3 m and 4 m on 20 m pixels: 0.0225 and 0.04 px².
+    let d = |a: [[f64; 2]; 2], b: [[f64; 2]; 2]| {
+        [a[0][0] - b[0][0], a[1][1] - b[1][1], a[0][1] - b[0][1]]
+    };
+    let px = d(with.center_cov_tile_px2, bare.center_cov_tile_px2);
+    assert!(
+        (px[0] - 0.0225).abs() < 1e-12 && (px[1] - 0.04).abs() < 1e-12 && px[2] == 0.0,
+        "{px:?}"
+    );
+    let m = d(with.center_cov_geo_m2, bare.center_cov_geo_m2);
+    assert!(
+        (m[0] - 9.0).abs() < 1e-9 && (m[1] - 16.0).abs() < 1e-9 && m[2] == 0.0,
+        "{m:?}"
+    );
+    assert_eq!(with.center_geo_m, bare.center_geo_m);
 }

@@ -49,7 +49,7 @@ fn bench_navigator(c: &mut Criterion) {
         upright: false,
     };
     let tile_bytes =
-        build_tile(&img, &grid, &cfg, 512, smoothing_m).unwrap_or_else(|e| panic!("{e}"));
+        build_tile(&img, &grid, &cfg, 512, smoothing_m, [0.0; 2]).unwrap_or_else(|e| panic!("{e}"));
     let tile = Tile::parse(&tile_bytes).unwrap_or_else(|e| panic!("{e}"));
     let nav = Navigator::new(tile, NavConfig::default());
     let pose = FramePose {

@@ -58,8 +58,9 @@ fn reference() -> (Vec<nav_core::SlopePx>, Vec<u8>) {
         &grid,
         &SurfConfig::default(),
         ground_sim::reference::tile::MAX_TILE_FEATURES,
-        // Slope frames are compared as given: no terrain smoothing.
+        // Slope frames are compared as given: no terrain smoothing, no map error claimed.
         0.0,
+        [0.0; 2],
     )
     .unwrap();
     (slope, tile)

@@ -279,8 +279,10 @@ pub fn register(
             upright: false,
         },
         MAX_TILE_FEATURES,
-        // Images are registered as given: no terrain smoothing on either side.
+        // Images are registered as given: no terrain smoothing on either side, and the
+        // reference image is the authority (no map error of its own).
         0.0,
+        [0.0; 2],
     )?;
     let tile = Tile::parse(&tile_bytes).map_err(|e| anyhow!("tile: {e}"))?;
     let tile_build_ms = t0.elapsed().as_secs_f64() * 1e3;

@@ -47,6 +47,8 @@ pub struct TileSummary {
     pub octaves: u8,
     /// Terrain smoothing σ recorded in the tile (frames are smoothed to it), metres.
     pub smoothing_m: f64,
+    /// The map's own horizontal error the tile claims, 1σ per axis (x, y), metres.
+    pub reference_sigma_m: [f32; 2],
     /// Of which applied by the tile builder, metres (the rest the DEM already had).
     pub smoothing_applied_m: f64,
 }
@@ -140,6 +142,27 @@ pub const DEFAULT_SMOOTHING_M: f64 = 40.0;
 /// (500 frames, seed 1): shoemaker 92.0 % → 99.2 % success, shackleton 99.8 % → 100 %, no false
 /// fix; sweep in docs/insar.md.
 pub const INSAR_SMOOTHING_M: f64 = 50.0;
+
+/// How far, per metre of blur the frames do not share, the map's blobs sit from where a frame
+/// finds them (the κ of [`reference_sigma_m`]). Calibrated on the terrain suite's InSAR tiles
+/// (terrain and campaign seed 1: lola, shoemaker, shackleton-floor, plains; the fixes' mean
+/// NEES under the refinement's covariance plus this term), checked on seed 2 and on the noisy
+/// mission-radar tiles (docs/registration.md, Covariance).
+pub const REFERENCE_SHIFT_PER_BLUR: f64 = 0.08;
+
+/// The map's own horizontal error a tile claims, 1σ per axis, metres
+/// (`nav_core::TileHeader::reference_sigma_m`): [`REFERENCE_SHIFT_PER_BLUR`] × the blur the
+/// frames cannot reproduce, the DEM's inherent smoothing `inherent_m` (e.g. an InSAR DEM's
+/// multilook and filter blur, Gaussian-equivalent σ; its shape is not the Gaussian the frames
+/// are smoothed with, so blobs land differently). Errors that shift a whole frame alike never
+/// show in a fix's residuals, so the tile must say them. A DEM with no blur of its own (a
+/// truth-built tile) claims 0: the frames' binning and smoothing reproduce its resolution, and
+/// the suite's truth-tile fixes have mean offsets ≤ 0.3 m (docs/registration.md, where a
+/// grid-phase term, pixel/√12, was tried and left the truth tiles' σ four times too large).
+pub fn reference_sigma_m(inherent_m: f64) -> [f32; 2] {
+    let s = REFERENCE_SHIFT_PER_BLUR * inherent_m.max(0.0);
+    [s as f32; 2]
+}
 
 /// SURF settings of a reference tile for frames with `noise`, on a tile of `pixel_m` metres
 /// whose terrain carries `smoothing_m` (metres) of Gaussian smoothing: nav-core's defaults with
@@ -267,7 +290,15 @@ pub fn write_reference(
             .take(nav_core::tile::MAX_PROJECTION_LEN)
             .collect(),
     };
-    let bytes = build_tile(&img, &grid, cfg, max_features, smoothing.target_m)?;
+    let ref_sigma = reference_sigma_m(smoothing.inherent_m);
+    let bytes = build_tile(
+        &img,
+        &grid,
+        cfg,
+        max_features,
+        smoothing.target_m,
+        ref_sigma,
+    )?;
     let features = Tile::parse(&bytes)
         .map(|t| t.len())
         .map_err(|e| anyhow::anyhow!("{e}"))?;
@@ -283,6 +314,7 @@ pub fn write_reference(
         threshold: cfg.detector.threshold,
         octaves: cfg.detector.octaves,
         smoothing_m: smoothing.target_m,
+        reference_sigma_m: ref_sigma,
         smoothing_applied_m: smoothing.applied_m(),
     };
     std::fs::write(

@@ -57,12 +57,15 @@ pub fn tile_features(
 /// carries (`smoothing_m`, metres; see `nav_core::TileHeader::smoothing_m`; 0 for slope images
 /// that frames will be compared with as they are), and the slope image itself as the tile's
 /// reference raster (2 bytes per pixel), which the flyer's dense refinement aligns frames to.
+/// `reference_sigma_m` is the map's own horizontal error the tile claims (x, y; metres; see
+/// `nav_core::TileHeader::reference_sigma_m` and [`super::reference_sigma_m`]).
 pub fn build_tile(
     slope: &SlopeImage<'_>,
     grid: &GeoGrid,
     cfg: &SurfConfig,
     max_features: usize,
     smoothing_m: f64,
+    reference_sigma_m: [f32; 2],
 ) -> Result<Vec<u8>> {
     let all = tile_features(slope, cfg)?;
     let feats = &all.as_slice()[..all.len().min(max_features)];
@@ -87,6 +90,7 @@ pub fn build_tile(
         min_scale_px: cfg.detector.min_scale_px,
         upright: cfg.upright,
         smoothing_m: smoothing_m as f32,
+        reference_sigma_m,
     };
     let raster = slope.pixels();
     let mut buf = vec![0u8; tile_len_with_raster(MAX_HEADER_LEN, feats.len(), raster.len())];
