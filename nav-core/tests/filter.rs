@@ -60,6 +60,7 @@ fn filter_is_consistent_and_rejects_outliers() {
                 yaw_rad: yaw + 0.5f64.to_radians() * gauss(&mut rng),
                 position_cov_m2: [[sx * sx, 0.0], [0.0, sy * sy]],
                 yaw_sigma_rad: 0.5f64.to_radians(),
+                footprint_m: 0.0,
             };
             if outlier {
                 m.x_m += 300.0;
@@ -130,10 +131,170 @@ fn bad_inputs_are_refused() {
         yaw_rad: 0.0,
         position_cov_m2: [[-1.0, 0.0], [0.0, -1.0]],
         yaw_sigma_rad: 0.0,
+        footprint_m: 100.0,
     };
     assert!(
         f.update_fix(&m).is_err() || matches!(f.update_fix(&m), Ok(UpdateOutcome::Rejected { .. }))
     );
     assert!(f.update_altitude(f64::INFINITY, 1.0).is_err());
     assert!(f.position_m().iter().all(|v| v.is_finite()));
+}
+
+/// Fly a straight level line at 20 m/s with 1 Hz fixes whose errors come mostly from the
+/// ground, as TRN's do: half of each fix's error variance is the mean of fixed per-point errors
+/// of the ground points inside its 400 m footprint (so successive fixes, 20 m apart, share 95 %
+/// of their points), half is the frame's own, new each time (the split the filter's default
+/// `fix_shared_fraction` assumes). The filter is told the footprint `told_footprint_m` (0:
+/// fixes independent). Returns the fraction of horizontal NEES values in the 95 % band of
+/// χ²(2), and their mean.
+fn fly_over_correlated_ground(told_footprint_m: f64, seed: u64) -> (f64, f64) {
+    let cfg = FilterConfig::default();
+    let mut rng = Pcg32::new(seed, 7);
+    let (foot, sigma, per_foot) = (400.0f64, 4.0f64, 200.0f64);
+    // Ground points over the track's box with margins: 1 per (400²/200) m².
+    let (x0, x1, y0, y1) = (-400.0, 3000.0, -400.0, 400.0);
+    let n_pts = ((x1 - x0) * (y1 - y0) / (foot * foot / per_foot)) as usize;
+    let uni = |r: &mut Pcg32| r.next_u32() as f64 / 4_294_967_296.0;
+    let pts: Vec<[f64; 4]> = (0..n_pts)
+        .map(|_| {
+            let px = x0 + (x1 - x0) * uni(&mut rng);
+            let py = y0 + (y1 - y0) * uni(&mut rng);
+            // Per-point error such that the mean over `per_foot` points has 1σ `sigma`/√2.
+            let s = sigma * (0.5 * per_foot).sqrt();
+            [px, py, s * gauss(&mut rng), s * gauss(&mut rng)]
+        })
+        .collect();
+    let fix_error = |x: f64, y: f64| {
+        let (mut ex, mut ey, mut n) = (0.0, 0.0, 0.0);
+        for p in &pts {
+            if (p[0] - x).abs() <= 0.5 * foot && (p[1] - y).abs() <= 0.5 * foot {
+                ex += p[2];
+                ey += p[3];
+                n += 1.0;
+            }
+        }
+        if n > 0.0 {
+            (ex / n, ey / n)
+        } else {
+            (0.0, 0.0)
+        }
+    };
+    let dt = 0.01;
+    let g = cfg.gravity_mps2;
+    let (speed, z) = (20.0f64, 300.0f64);
+    let mut x = 0.0f64;
+    let init = InitialState {
+        position_m: [x + 30.0, -20.0, z],
+        velocity_mps: [speed, 0.0, 0.0],
+        yaw_rad: 0.0,
+        position_sigma_m: 40.0,
+        velocity_sigma_mps: 0.5,
+        attitude_sigma_rad: 1f64.to_radians(),
+        accel_bias_sigma: 0.003,
+        gyro_bias_sigma: 2e-5,
+    };
+    let mut f = NavFilter::new(&init, cfg);
+    let (mut in_band, mut checks, mut sum) = (0usize, 0usize, 0.0f64);
+    for step in 1..=12_000 {
+        x += speed * dt;
+        let accel = [0, 1, 2].map(|k| {
+            let g = if k == 2 { g } else { 0.0 };
+            g + cfg.accel_noise / dt.sqrt() * gauss(&mut rng)
+        });
+        let gyro = [0, 1, 2].map(|_| cfg.gyro_noise / dt.sqrt() * gauss(&mut rng));
+        f.propagate(dt, accel, gyro).unwrap();
+        if step % 100 == 0 {
+            let (ex, ey) = fix_error(x, 0.0);
+            let own = sigma * 0.5f64.sqrt();
+            let (ex, ey) = (ex + own * gauss(&mut rng), ey + own * gauss(&mut rng));
+            let m = FixMeasurement {
+                x_m: x + ex,
+                y_m: ey,
+                yaw_rad: 0.2f64.to_radians() * gauss(&mut rng),
+                position_cov_m2: [[sigma * sigma, 0.0], [0.0, sigma * sigma]],
+                yaw_sigma_rad: 0.2f64.to_radians(),
+                footprint_m: told_footprint_m,
+            };
+            f.update_fix(&m).unwrap();
+            f.update_altitude(z + gauss(&mut rng), 1.0).unwrap();
+            f.update_velocity(
+                [speed + 0.05 * gauss(&mut rng), 0.05 * gauss(&mut rng), 0.0],
+                0.05,
+            )
+            .unwrap();
+            if step > 1000 {
+                let p = f.position_m();
+                let c = f.horizontal_cov_m2();
+                let (dx, dy) = (x - p[0], -p[1]);
+                let det = c[0][0] * c[1][1] - c[0][1] * c[1][0];
+                let nees =
+                    (c[1][1] * dx * dx - (c[0][1] + c[1][0]) * dx * dy + c[0][0] * dy * dy) / det;
+                checks += 1;
+                sum += nees;
+                if (0.0506..=7.378).contains(&nees) {
+                    in_band += 1;
+                }
+            }
+        }
+    }
+    (in_band as f64 / checks as f64, sum / checks as f64)
+}
+
+#[test]
+fn fixes_of_shared_ground_do_not_make_the_filter_overconfident() {
+    // Pool several seeds: one flight's NEES values are strongly autocorrelated.
+    let (mut told, mut blind) = ((0.0, 0.0), (0.0, 0.0));
+    let seeds = [11u64, 12, 13, 14, 15, 16];
+    for &seed in &seeds {
+        let a = fly_over_correlated_ground(400.0, seed);
+        let b = fly_over_correlated_ground(0.0, seed);
+        println!(
+            "seed {seed}: footprint told: {:.1} % in band, mean NEES {:.2}; fixes taken as independent: {:.1} %, {:.2}",
+            a.0 * 100.0,
+            a.1,
+            b.0 * 100.0,
+            b.1
+        );
+        told = (told.0 + a.0, told.1 + a.1);
+        blind = (blind.0 + b.0, blind.1 + b.1);
+    }
+    let n = seeds.len() as f64;
+    let (told, blind) = ((told.0 / n, told.1 / n), (blind.0 / n, blind.1 / n));
+    // Modelled: consistent (95 % band holds ~95 %, mean NEES near 2). Ignored: the same fixes
+    // make the filter overconfident, which is what this model exists to prevent.
+    assert!(told.0 >= 0.85, "with the footprint: {:.3} in band", told.0);
+    assert!(
+        (0.7..=3.5).contains(&told.1),
+        "with the footprint: mean NEES {:.2}",
+        told.1
+    );
+    assert!(
+        blind.1 > 2.0 * told.1,
+        "independent fixes were not overconfident: {blind:?}"
+    );
+}
+
+#[test]
+fn footprint_correlation_is_the_overlap() {
+    use nav_core::filter::{MAX_FIX_CORRELATION, footprint_correlation};
+    assert_eq!(
+        footprint_correlation([0.0, 0.0], 100.0, [0.0, 0.0], 100.0),
+        MAX_FIX_CORRELATION
+    );
+    assert!((footprint_correlation([0.0, 0.0], 100.0, [25.0, 0.0], 100.0) - 0.75).abs() < 1e-12);
+    assert!((footprint_correlation([0.0, 0.0], 100.0, [10.0, 20.0], 100.0) - 0.72).abs() < 1e-12);
+    // A 50 m footprint inside a 100 m one: shared 2500 m² over sqrt(10⁴ · 2500) = 5000.
+    assert!((footprint_correlation([0.0, 0.0], 100.0, [5.0, 5.0], 50.0) - 0.5).abs() < 1e-12);
+    assert_eq!(
+        footprint_correlation([0.0, 0.0], 100.0, [150.0, 0.0], 100.0),
+        0.0
+    );
+    assert_eq!(
+        footprint_correlation([0.0, 0.0], 0.0, [0.0, 0.0], 100.0),
+        0.0
+    );
+    assert_eq!(
+        footprint_correlation([0.0, 0.0], f64::NAN, [0.0, 0.0], 100.0),
+        0.0
+    );
 }

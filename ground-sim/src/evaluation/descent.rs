@@ -54,11 +54,6 @@ pub struct DescentConfig {
     /// 1σ Doppler-velocimeter noise per axis, m/s (0: none). Below the last TRN fix (frames too
     /// fine for the 20 m tile) only velocity aiding keeps the position from drifting.
     pub velocimeter_sigma_mps: f64,
-    /// Fix position covariance inflation (variance factor) for the filter: keypoint errors are
-    /// correlated within a frame and between frames over the same terrain, so the fix's own
-    /// residual-based covariance is optimistic. Measured on 12 hops (seed 1): factor 4 gave a mean
-    /// horizontal NEES of 5.1, factor 10 gives 1.6 (2 is consistent).
-    pub fix_cov_inflation: f64,
     /// Ranging sensor.
     pub sensor: SensorModel,
     /// Filter noise model (also the IMU's simulated noise densities).
@@ -86,7 +81,6 @@ impl Default for DescentConfig {
             // 10 arcsec, a common star-tracker class; PSRs still see the sky.
             star_tracker_sigma_rad: 4.8e-5,
             velocimeter_sigma_mps: 0.05,
-            fix_cov_inflation: 10.0,
             sensor: SensorModel::default(),
             filter: FilterConfig::default(),
         }
@@ -419,19 +413,17 @@ pub fn fly(
                 .map_err(|e| anyhow::anyhow!("navigator: {e}"))?;
                 match r.report.outcome {
                     Ok(f) => {
+                        // The fix's own covariance as nav-core reports it; the filter models
+                        // the correlation of successive fixes over the same ground.
                         let cg = f.center_cov_geo_m2;
-                        let k = cfg.fix_cov_inflation;
-                        // Floors: a fix is never better than a tenth of a tile pixel.
-                        let floor = (0.1 * tile_px).powi(2);
                         let m = FixMeasurement {
                             x_m: f.center_geo_m[0],
                             y_m: f.center_geo_m[1],
                             yaw_rad: -f.similarity.rotation_rad,
-                            position_cov_m2: [
-                                [(k * cg[0][0]).max(floor), k * cg[0][1]],
-                                [k * cg[1][0], (k * cg[1][1]).max(floor)],
-                            ],
-                            yaw_sigma_rad: (2.0 * f.heading_sigma_rad).max(0.1f64.to_radians()),
+                            position_cov_m2: cg,
+                            yaw_sigma_rad: f.heading_sigma_rad,
+                            footprint_m: cfg.sensor.width_px.max(cfg.sensor.height_px) as f64
+                                * pixel_m,
                         };
                         fix_m = Some(f.center_geo_m);
                         match filt

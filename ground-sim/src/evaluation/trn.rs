@@ -91,6 +91,10 @@ pub struct TrnScore {
     /// the covariance is consistent, ≤ 9 (the 3σ ellipse) for 98.9 % of consistent fixes.
     #[serde(with = "crate::evaluation::shard::opt_f64")]
     pub nees: Option<f64>,
+    /// Reported 1σ of the heading, degrees (the fix's `heading_sigma_rad`): with
+    /// `heading_err_deg` it shows whether the heading's uncertainty is honest.
+    #[serde(default, with = "crate::evaluation::shard::opt_f64")]
+    pub heading_sigma_deg: Option<f64>,
     /// Onboard time on this host, ms.
     pub time_ms: f64,
     /// Truth pose.
@@ -170,6 +174,7 @@ fn fill_fix(
     let expect = expected_rotation_rad(h, pose.heading_rad).to_degrees();
     s.rotation_deg = Some(rot);
     s.heading_err_deg = Some(wrap_deg(rot - expect));
+    s.heading_sigma_deg = Some(f.heading_sigma_rad.to_degrees());
     s.scale = Some(f.similarity.scale);
     let (cx, cy) = ((w as f64 - 1.0) / 2.0, (hh as f64 - 1.0) / 2.0);
     let (tx, ty) = truth_to_tile(h, pose, w, hh, cx, cy);
