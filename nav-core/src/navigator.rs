@@ -416,9 +416,17 @@ impl<'t> Navigator<'t> {
             max_iterations: self.cfg.search.refine_max_iterations,
             ..self.cfg.refine
         };
+        // A refused hit leaves the refinement's verdict in the report (why no fix).
         let r = match refine(img, k, raster, &hit.affine, &rcfg) {
             Ok(r) if r.ncc_after >= self.cfg.gate.verify_min_ncc => r,
-            _ => return,
+            Ok(_) => {
+                report.refine = Some(Err(RefineError::WorseCorrelation));
+                return;
+            }
+            Err(e) => {
+                report.refine = Some(Err(e));
+                return;
+            }
         };
         let fix = Fix::from_area_search(&r, self.tile.header(), frame_w, frame_h);
         let sim = fix.similarity;

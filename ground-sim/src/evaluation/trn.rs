@@ -133,7 +133,10 @@ pub fn score(
         no_fix_reason: run.report.outcome.err().map(|e| match run.report.search {
             // The search ran after the feature path failed: its verdict is the last word.
             Some(Err(se)) => format!("area search: {se}"),
-            Some(Ok(_)) => "area search: not confirmed by the refinement".to_string(),
+            Some(Ok(_)) => match &run.report.refine {
+                Some(Err(re)) => format!("area search: not confirmed by the refinement ({re})"),
+                _ => "area search: refused by the scale or prior gate".to_string(),
+            },
             None => e.to_string(),
         }),
         features: run.report.features,
