@@ -7,7 +7,9 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use ground_sim::dem::read_geotiff;
-use ground_sim::insar::pipeline::{process_simulated, process_slcs};
+use ground_sim::insar::pipeline::{
+    LookDirections, process_simulated, process_slcs, run_from_dem_looks,
+};
 use ground_sim::insar::products::{InsarReport, RunContext, SarSummary, write_outputs};
 use ground_sim::insar::{InsarConfig, label};
 use ground_sim::sar::cli::RadarArgs;
@@ -53,6 +55,10 @@ pub struct Args {
     /// echo model).
     #[command(flatten)]
     pub radar: RadarArgs,
+    /// Look directions: `one` (east, as the paper) or `both` (a second, west-looking pass over
+    /// the same scene, fused cell by cell by validity and CRLB; twice the SAR time).
+    #[arg(long, value_enum, default_value_t = LookDirections::One)]
+    pub looks: LookDirections,
     /// Hide progress bars.
     #[arg(long)]
     pub no_progress: bool,
@@ -91,6 +97,17 @@ pub fn run_chain(a: &Args) -> anyhow::Result<InsarReport> {
         ..RunContext::default()
     };
     let (truth, product) = match &a.slc_dir {
+        Some(_) if a.looks == LookDirections::Both => {
+            anyhow::bail!(
+                "--looks both simulates both passes itself; --slc-dir holds one pass (drop one of them)"
+            )
+        }
+        None if a.looks == LookDirections::Both => {
+            let run = run_from_dem_looks(&truth, &sar, pol, &cfg, !a.no_progress, a.looks)?;
+            ctx.filled_nodata = run.filled_nodata;
+            ctx.sar = Some(SarSummary::of(&run.pair));
+            (run.truth, run.product)
+        }
         Some(dir) => {
             let read = |n: u8| -> anyhow::Result<Slc> {
                 let p = dir.join(format!("slc_a{n}_{}.bin", pol.tag()));

@@ -57,6 +57,9 @@ pub struct Args {
     /// Radar of the InSAR tiles (as `insar`: noise off unless `--nesz-db`).
     #[command(flatten)]
     pub radar: RadarArgs,
+    /// Look directions of the InSAR tiles (`both`: a second, west-looking pass fused in).
+    #[arg(long, value_enum, default_value_t = ground_sim::insar::pipeline::LookDirections::One)]
+    pub looks: ground_sim::insar::pipeline::LookDirections,
     /// The navigator budget.
     #[command(flatten)]
     pub budget: super::BudgetArgs,
@@ -114,6 +117,7 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         reference_pixel_m: 20.0,
         radar,
         polarisation,
+        looks: a.looks,
         navmap: NavmapThresholds::default(),
         budget: a.budget.budget,
     };

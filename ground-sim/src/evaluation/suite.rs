@@ -20,7 +20,7 @@ use crate::evaluation::navmap::{NavMap, NavmapScore, NavmapThresholds};
 use crate::flyer::frames::SensorModel;
 use crate::flyer::onboard::Budget;
 use crate::insar::InsarConfig;
-use crate::insar::pipeline::run_from_dem;
+use crate::insar::pipeline::{LookDirections, run_from_dem_looks};
 use crate::insar::products::{RunContext, SarSummary, write_outputs};
 use crate::pictures::render::{GLYPH, draw_text};
 use crate::reference::noise_floor::FrameNoise;
@@ -187,6 +187,8 @@ pub struct SuiteSpec {
     pub radar: SarConfig,
     /// Its InSAR channel.
     pub polarisation: Polarisation,
+    /// Look directions of the InSAR tiles.
+    pub looks: LookDirections,
     /// Navigability-map thresholds.
     pub navmap: NavmapThresholds,
     /// Navigator budget (flight unless asked otherwise).
@@ -311,7 +313,14 @@ pub fn run_scene(
                     pixel_m: spec.reference_pixel_m,
                     ..InsarConfig::default()
                 };
-                let run = run_from_dem(&dem, &spec.radar, spec.polarisation, &cfg, false)?;
+                let run = run_from_dem_looks(
+                    &dem,
+                    &spec.radar,
+                    spec.polarisation,
+                    &cfg,
+                    false,
+                    spec.looks,
+                )?;
                 let ctx = RunContext {
                     sar: Some(SarSummary::of(&run.pair)),
                     input_dem: Some(dir.join("dem.tif")),
@@ -476,11 +485,22 @@ pub fn navmap_picture(m: &NavMap, slope_deg: &[f32]) -> RgbImage {
 
 /// The suite's table as Markdown: one row per campaign.
 pub fn table_markdown(r: &SuiteReport) -> String {
+    let noise = r.spec.radar.noise_equivalent_sigma0_db;
     let mut s = format!(
-        "{} frames per campaign, campaign seed {}, navigator budget {}.\n\n",
+        "{} frames per campaign, campaign seed {}, navigator budget {}; InSAR tiles: {} m baseline, {}, {}.\n\n",
         r.spec.trials,
         r.spec.seed,
-        r.spec.budget.label()
+        r.spec.budget.label(),
+        r.spec.radar.baseline_m,
+        if noise.is_finite() {
+            format!("NESZ {noise} dB")
+        } else {
+            "no thermal noise".to_string()
+        },
+        match r.spec.looks {
+            LookDirections::One => "one look (east)",
+            LookDirections::Both => "both looks fused",
+        }
     );
     s += concat!(
         "| scene | tile | prior | success | false | no fix (reasons) | pos p50 / p95 m | heading p95 ° | in 3σ | NEES | ms/frame | navmap go: success / agree |\n",

@@ -239,6 +239,36 @@ pub struct InsarProduct {
     pub coherence_mean_radar: f64,
     /// Processing time, s.
     pub seconds: f64,
+    /// With two look directions: how the passes were fused (the other fields describe the
+    /// east-looking pass, except `dem`, `coherence`, `crlb_m`, `labels` and `mask`, which are
+    /// the fused map's).
+    pub look_fusion: Option<LookFusion>,
+}
+
+/// Look directions of an InSAR map.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum LookDirections {
+    /// One pass, the radar looking east (towards +columns), as the paper.
+    #[default]
+    One,
+    /// A second pass looking west, fused with the first cell by cell.
+    Both,
+}
+
+/// How two look directions were fused on the output grid.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct LookFusion {
+    /// Mask fractions of the east-looking pass alone.
+    pub east_mask: MaskFractions,
+    /// Mask fractions of the west-looking pass alone.
+    pub west_mask: MaskFractions,
+    /// Fraction of cells valid in both passes (height = inverse-variance mean by their CRLB).
+    pub both_valid: f64,
+    /// Fraction valid in the east pass only.
+    pub east_only: f64,
+    /// Fraction valid in the west pass only.
+    pub west_only: f64,
 }
 
 /// Run the InSAR chain on `a1`, `a2` onto `grid`.
@@ -565,6 +595,7 @@ pub fn process_pair(
         geometry_removed,
         coherence_mean_radar,
         seconds: t0.elapsed().as_secs_f64(),
+        look_fusion: None,
     })
 }
 
@@ -751,6 +782,118 @@ pub fn run_from_dem(
         truth: truth_on_grid,
         product,
     })
+}
+
+/// [`run_from_dem`] with a choice of look directions. `Both` flies a second pass over the
+/// mirrored scene (columns reversed, the same georeference): the same radar, looking west
+/// instead of east, so that slopes in layover or shadow for one look face the other look at a
+/// gentle angle, and any range-direction shift of one pass is mirrored in the other. Its grid
+/// layers are mirrored back and fused with the first pass by [`fuse_looks`]; the rest of the
+/// run (SLCs, radar layers, report geometry) is the east pass's.
+pub fn run_from_dem_looks(
+    truth: &Dem,
+    sar: &SarConfig,
+    pol: Polarisation,
+    cfg: &InsarConfig,
+    progress: bool,
+    looks: LookDirections,
+) -> anyhow::Result<ChainRun> {
+    let mut east = run_from_dem(truth, sar, pol, cfg, progress)?;
+    if looks == LookDirections::One {
+        return Ok(east);
+    }
+    let (w, h) = (truth.width(), truth.height());
+    let mut mirrored = Dem::new(
+        w,
+        h,
+        mirror_columns(truth.heights_m(), w),
+        truth.geo.clone(),
+    )?;
+    mirrored.nodata = truth.nodata;
+    mirrored.sample = truth.sample;
+    let west = run_from_dem(&mirrored, sar, pol, cfg, progress)?;
+    fuse_looks(&mut east.product, &west.product)?;
+    Ok(east)
+}
+
+/// Each row of a row-major `w`-wide raster reversed.
+pub fn mirror_columns<T: Copy>(v: &[T], w: usize) -> Vec<T> {
+    v.chunks(w.max(1))
+        .flat_map(|row| row.iter().rev().copied())
+        .collect()
+}
+
+/// Fuse the west-looking pass `west` (computed on the mirrored scene, so its grid layers are
+/// mirrored here) into the east-looking `east`, cell by cell: a cell valid in both takes the
+/// inverse-variance mean of the two heights by their CRLB (and that variance's fused bound); a
+/// cell valid in one takes that one; a cell valid in neither keeps the worse label.
+pub fn fuse_looks(east: &mut InsarProduct, west: &InsarProduct) -> anyhow::Result<LookFusion> {
+    let w = east.grid.width;
+    let n = east.labels.len();
+    anyhow::ensure!(
+        west.labels.len() == n && west.grid.width == w && west.grid.height == east.grid.height,
+        "the two looks' grids differ"
+    );
+    let wd = mirror_columns(west.dem.heights_m(), w);
+    let wc = mirror_columns(west.coherence.heights_m(), w);
+    let ws = mirror_columns(west.crlb_m.heights_m(), w);
+    let wl = mirror_columns(&west.labels, w);
+    let east_mask = east.mask;
+    let (mut both, mut e_only, mut w_only) = (0usize, 0usize, 0usize);
+    let mut dem = east.dem.heights_m().to_vec();
+    let mut coh = east.coherence.heights_m().to_vec();
+    let mut sig = east.crlb_m.heights_m().to_vec();
+    for i in 0..n {
+        let ev = east.labels[i] == label::VALID && dem[i].is_finite();
+        let wv = wl[i] == label::VALID && wd[i].is_finite();
+        match (ev, wv) {
+            (true, true) => {
+                both += 1;
+                // Inverse-variance weights; equal weights where a bound is missing.
+                let (se, sw) = (f64::from(sig[i]), f64::from(ws[i]));
+                let (ie, iw) = if se > 0.0 && sw > 0.0 && se.is_finite() && sw.is_finite() {
+                    (1.0 / (se * se), 1.0 / (sw * sw))
+                } else {
+                    (1.0, 1.0)
+                };
+                let t = ie + iw;
+                dem[i] = ((f64::from(dem[i]) * ie + f64::from(wd[i]) * iw) / t) as f32;
+                coh[i] = ((f64::from(coh[i]) * ie + f64::from(wc[i]) * iw) / t) as f32;
+                if se > 0.0 && sw > 0.0 && se.is_finite() && sw.is_finite() {
+                    sig[i] = (1.0 / t.sqrt()) as f32;
+                }
+            }
+            (true, false) => e_only += 1,
+            (false, true) => {
+                w_only += 1;
+                dem[i] = wd[i];
+                coh[i] = wc[i];
+                sig[i] = ws[i];
+                east.labels[i] = label::VALID;
+            }
+            (false, false) => {
+                east.labels[i] = label::worst(east.labels[i], wl[i]);
+                dem[i] = f32::NAN;
+                coh[i] = f32::NAN;
+                sig[i] = f32::NAN;
+            }
+        }
+    }
+    east.dem = east.grid.raster(dem)?;
+    east.coherence = east.grid.raster(coh)?;
+    east.crlb_m = east.grid.raster(sig)?;
+    east.mask = MaskFractions::of(&east.labels);
+    let frac = |k: usize| k as f64 / n.max(1) as f64;
+    let fusion = LookFusion {
+        east_mask,
+        west_mask: west.mask,
+        both_valid: frac(both),
+        east_only: frac(e_only),
+        west_only: frac(w_only),
+    };
+    east.look_fusion = Some(fusion);
+    east.seconds += west.seconds;
+    Ok(fusion)
 }
 
 /// The InSAR chain on an already simulated pair of `truth`; returns the truth on the output

@@ -83,6 +83,8 @@ pub struct InsarReport {
     pub unwrap: UnwrapReport,
     /// Fractions of the output grid per mask code.
     pub mask: MaskFractions,
+    /// With two look directions (`--looks both`): each pass's mask and how they were fused.
+    pub looks: Option<crate::insar::pipeline::LookFusion>,
     /// Pixels removed by the eq 20 test on the generated DEM.
     pub eq20_removed_pixels: usize,
     /// Pixels removed by the ray-traced shadow and layover of the generated DEM.
@@ -343,6 +345,7 @@ pub fn write_outputs(
         coherence_mean_radar: p.coherence_mean_radar,
         coregistration: p.coreg,
         unwrap: p.unwrap,
+        looks: p.look_fusion,
         mask: p.mask,
         eq20_removed_pixels: p.eq20_removed,
         geometry_removed_pixels: p.geometry_removed,

@@ -131,6 +131,67 @@ fn a_wall_steeper_than_the_incidence_is_masked_as_eq20_says() {
 }
 
 #[test]
+fn a_second_look_maps_the_wall_the_first_has_in_layover() {
+    use super::pipeline::{LookDirections, mirror_columns, run_from_dem_looks};
+    assert_eq!(
+        mirror_columns(&[1, 2, 3, 4, 5, 6], 3),
+        vec![3, 2, 1, 6, 5, 4]
+    );
+    // The wall of the test above, 35° facing the east-looking radar: layover for it, a gentle
+    // slope facing away for a radar looking west.
+    let t = 35f64.to_radians().tan();
+    let dem = scene(200, 5.0, |x, _| -2000.0 + t * (x - 400.0).clamp(0.0, 200.0));
+    // Masks by geometry and coherence only: the default brightness rule (12 dB below the
+    // median) also drops the wall for the west look, where it faces away at a 61° local
+    // incidence and is dark though not in shadow (19 % of this small scene).
+    let cfg = InsarConfig {
+        shadow_below_median_db: f64::INFINITY,
+        ..InsarConfig::default()
+    };
+    let one = run_from_dem_looks(
+        &dem,
+        &quiet(),
+        Polarisation::HH,
+        &cfg,
+        false,
+        LookDirections::One,
+    )
+    .unwrap();
+    let both = run_from_dem_looks(
+        &dem,
+        &quiet(),
+        Polarisation::HH,
+        &cfg,
+        false,
+        LookDirections::Both,
+    )
+    .unwrap();
+    let a1 = compare(&one.product, &one.truth.grid, None).unwrap();
+    let a2 = compare(&both.product, &both.truth.grid, None).unwrap();
+    let f = both.product.look_fusion.expect("fusion report");
+    eprintln!(
+        "one look: valid {:.3} rmse {:.2} m; both: valid {:.3} rmse {:.2} m; {f:?}",
+        a1.valid_fraction, a1.height_rmse_m, a2.valid_fraction, a2.height_rmse_m
+    );
+    assert!(one.product.look_fusion.is_none());
+    // The east pass loses the wall; the west pass fills it, and the fused map is complete.
+    assert!(a1.eq20_layover_fraction > 0.1);
+    assert!(f.west_only > 0.8 * a1.eq20_layover_fraction, "{f:?}");
+    assert!(a2.valid_fraction > 0.98, "valid {}", a2.valid_fraction);
+    assert!(a2.valid_fraction > a1.valid_fraction + 0.1);
+    // With the wall's heights in, the map is as good as the one look on the flat parts.
+    assert!(a2.height_rmse_m < 5.0, "rmse {}", a2.height_rmse_m);
+    let fused_valid = both
+        .product
+        .labels
+        .iter()
+        .filter(|&&l| l == super::label::VALID)
+        .count();
+    let sum = f.both_valid + f.east_only + f.west_only;
+    assert!((fused_valid as f64 / both.product.labels.len() as f64 - sum).abs() < 1e-9);
+}
+
+#[test]
 fn a_fresh_crater_is_masked_by_its_geometry_and_the_brightness_rule_adds_to_it() {
     use crate::terrain::crater::make_stamp;
     use crate::terrain::sfd::CraterDraw;
