@@ -42,6 +42,9 @@ enum Commands {
     /// The terrain suite: every scene × {truth-built, InSAR tile} × {no prior, prior} as eval
     /// campaigns, with the navigability map scored; one table, one picture, JSON.
     Suite(cli::suite::Args),
+    /// Radar design trade: thermal noise × baseline × look directions → CRLB, measured DEM
+    /// accuracy, tile features and TRN success per point; JSON, table, picture.
+    Trade(cli::trade::Args),
     /// Navigability map of a reference folder: where a frame is predicted to get a fix.
     Navmap(cli::navmap::Args),
     /// Regenerate docs/results.md from fresh runs (paper cases, campaigns, descents).
@@ -84,6 +87,7 @@ fn dispatch(cli: Cli) -> anyhow::Result<()> {
         Commands::Merge(a) => cli::merge::run(a),
         Commands::Suite(a) => cli::suite::run(a),
         Commands::Navmap(a) => cli::navmap::run(a),
+        Commands::Trade(a) => cli::trade::run(a),
         Commands::Sar(a) => run_sar(a.clone()),
         Commands::Insar(a) => cli::insar::run(a),
         Commands::Psf(a) => run_psf(a.clone()),

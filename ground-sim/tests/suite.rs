@@ -207,3 +207,20 @@ fn suite_and_navmap_refuse_bad_input_clearly() {
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("tile.bin"));
 }
+
+#[test]
+fn trade_refuses_bad_input_clearly() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = ground_sim(&["trade", "--scenes", "nowhere", "--out", path(dir.path())]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("no scene named \"nowhere\""), "{err}");
+    let out = ground_sim(&["trade", "--baseline-m", "0", "--out", path(dir.path())]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--baseline-m positive"));
+    let out = ground_sim(&["trade", "--trials", "0", "--out", path(dir.path())]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--trials must be"));
+    // Nothing was written for refused input.
+    assert!(!dir.path().join("trade.json").exists());
+}

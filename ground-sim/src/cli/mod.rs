@@ -15,6 +15,7 @@ pub mod results;
 pub mod suite;
 pub mod terrain;
 pub mod tile;
+pub mod trade;
 pub mod trn;
 
 use std::time::Duration;
