@@ -33,6 +33,10 @@ pub struct Args {
     /// Look directions.
     #[arg(long, value_enum, value_delimiter = ',', default_values_t = [LookDirections::One, LookDirections::Both])]
     pub looks: Vec<LookDirections>,
+    /// Diffuse surface backscatter at normal incidence, dB, for every point (`-inf`: none, the
+    /// paper's two-scale surface; docs/insar.md, "Walls under noise").
+    #[arg(long, allow_hyphen_values = true, default_value_t = f64::NEG_INFINITY)]
+    pub diffuse_db: f64,
     /// Frames per TRN campaign.
     #[arg(long, default_value_t = 100)]
     pub trials: usize,
@@ -42,6 +46,9 @@ pub struct Args {
     /// Terrain seed of the scenes.
     #[arg(long, default_value_t = 1)]
     pub terrain_seed: u64,
+    /// Side of every scene, metres (the suite's 4 km by default).
+    #[arg(long, default_value_t = 4000.0)]
+    pub size_m: f64,
     /// Campaign seed (frame poses and noise).
     #[arg(long, default_value_t = 1)]
     pub campaign_seed: u64,
@@ -91,6 +98,10 @@ pub struct TradeReport {
     pub campaign_seed: u64,
     /// Terrain seed.
     pub terrain_seed: u64,
+    /// Side of every scene, m.
+    pub size_m: f64,
+    /// Diffuse surface backscatter at normal incidence, dB (null: none).
+    pub diffuse_db: Option<f64>,
     /// Prior of the campaigns (null: none).
     pub prior: Option<PriorSpec>,
     /// Navigator budget.
@@ -107,13 +118,19 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
     if a.trials == 0 {
         bail!("--trials must be ≥ 1");
     }
+    if a.diffuse_db.is_nan() || a.diffuse_db > 0.0 {
+        bail!("--diffuse-db must be ≤ 0 dB (or -inf for none)");
+    }
     if a.nesz_db.iter().any(|v| v.is_nan()) || a.baseline_m.iter().any(|b| !(*b > 0.0)) {
         bail!("--nesz-db must be numbers (or -inf) and --baseline-m positive");
     }
     if a.nesz_db.is_empty() || a.baseline_m.is_empty() || a.looks.is_empty() {
         bail!("--nesz-db, --baseline-m and --looks each need at least one value");
     }
-    let all = default_scenes(a.terrain_seed, 4000.0, None);
+    if !(a.size_m >= 1000.0 && a.size_m <= 20_000.0) {
+        bail!("--size-m must be in [1000, 20000] m");
+    }
+    let all = default_scenes(a.terrain_seed, a.size_m, None);
     let mut scenes = Vec::new();
     for n in &a.scenes {
         match all.iter().find(|s| &s.name == n) {
@@ -138,6 +155,8 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         trials: a.trials,
         campaign_seed: a.campaign_seed,
         terrain_seed: a.terrain_seed,
+        size_m: a.size_m,
+        diffuse_db: a.diffuse_db.is_finite().then_some(a.diffuse_db),
         prior,
         budget: a.budget.budget.label().to_string(),
         points: Vec::new(),
@@ -151,6 +170,7 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
                     let radar = SarConfig {
                         baseline_m,
                         noise_equivalent_sigma0_db: nesz,
+                        diffuse_sigma0_db: a.diffuse_db,
                         polarisations: vec![Polarisation::HH],
                         ..SarConfig::default()
                     };
@@ -258,7 +278,7 @@ fn design_label(p: &TradePoint, many_scenes: bool) -> String {
 /// The table: one row per point.
 pub fn table_markdown(r: &TradeReport) -> String {
     let mut s = format!(
-        "{} frames per campaign ({}), campaign seed {}, terrain seed {}, navigator budget {}.\n\n",
+        "{} frames per campaign ({}), campaign seed {}, terrain seed {}, {}navigator budget {}.\n\n",
         r.trials,
         if r.prior.is_some() {
             "with a prior"
@@ -267,6 +287,8 @@ pub fn table_markdown(r: &TradeReport) -> String {
         },
         r.campaign_seed,
         r.terrain_seed,
+        r.diffuse_db
+            .map_or(String::new(), |d| format!("diffuse surface term {d} dB, ")),
         r.budget
     );
     s += "| scene | looks | baseline | NESZ | CRLB | height RMSE (/CRLB) | slope RMSE | valid | tile feat. | TRN success | false | p95 |\n";

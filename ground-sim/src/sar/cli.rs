@@ -46,6 +46,10 @@ pub struct RadarArgs {
     /// Disable thermal noise.
     #[arg(long)]
     pub no_noise: bool,
+    /// Diffuse backscatter at normal incidence, dB, of a σ0_d·cos θ law added to the paper's
+    /// two-scale surface (`-inf`: none; docs/insar.md derives −17 dB for the Moon at L band).
+    #[arg(long, allow_hyphen_values = true)]
+    pub diffuse_db: Option<f64>,
     /// Seed of the surface reflectivity and the noise.
     #[arg(long)]
     pub seed: Option<u64>,
@@ -88,6 +92,7 @@ impl RadarArgs {
         set(&mut cfg.baseline_m, self.baseline_m);
         set(&mut cfg.baseline_tilt_deg, self.baseline_tilt_deg);
         set(&mut cfg.noise_equivalent_sigma0_db, self.nesz_db);
+        set(&mut cfg.diffuse_sigma0_db, self.diffuse_db);
         set(&mut cfg.mesh_spacing_m, self.mesh_spacing_m);
         if self.no_noise {
             cfg.noise_equivalent_sigma0_db = f64::NEG_INFINITY;

@@ -119,6 +119,11 @@ pub struct SarConfig {
     pub spm_kl: f64,
     /// SPM normalised height standard deviation k·δ2.
     pub spm_ks: f64,
+    /// Diffuse backscatter at normal incidence, dB, of a `σ0_d·cos θ` law added to the
+    /// two-scale model (`-inf` = none, the paper's model and the default). Not in the paper:
+    /// the Moon's non-directional echo, which dominates beyond ≈ 40° local incidence
+    /// (docs/insar.md, "Diffuse scattering", derives −17 dB from lunar radar measurements).
+    pub diffuse_sigma0_db: f64,
     /// Polarisations to simulate (1 or 2 of HH, VV).
     pub polarisations: Vec<Polarisation>,
     /// Seed of the facet reflectivity `w` (shared by both antennas) and of the thermal noise.
@@ -150,6 +155,7 @@ impl Default for SarConfig {
             ka_rms_slope: 0.08,
             spm_kl: 3.0,
             spm_ks: 0.3,
+            diffuse_sigma0_db: f64::NEG_INFINITY,
             polarisations: vec![Polarisation::HH, Polarisation::VV],
             seed: 0x5EED_2023,
             noise_equivalent_sigma0_db: -30.0,
@@ -292,6 +298,11 @@ impl SarConfig {
         if self.polarisations.len() == 2 && self.polarisations[0] == self.polarisations[1] {
             return Err(SarError::Config("polarisations must be distinct".into()));
         }
+        if self.diffuse_sigma0_db.is_nan() || self.diffuse_sigma0_db > 0.0 {
+            return Err(SarError::Config(
+                "diffuse_sigma0_db must be ≤ 0 dB (or -inf for none)".into(),
+            ));
+        }
         if self.noise_equivalent_sigma0_db.is_nan() {
             return Err(SarError::Config(
                 "noise_equivalent_sigma0_db is NaN (use -inf)".into(),
@@ -310,6 +321,16 @@ impl SarConfig {
     pub fn bandwidth_hz(&self) -> f64 {
         SPEED_OF_LIGHT_M_S
             / (2.0 * self.ground_range_resolution_m * self.incidence_centre_deg.to_radians().sin())
+    }
+
+    /// Diffuse σ0 at normal incidence, linear (0 when the term is off).
+    pub fn diffuse_sigma0_linear(&self) -> f64 {
+        let db = self.diffuse_sigma0_db;
+        if db.is_finite() {
+            10f64.powf(db / 10.0)
+        } else {
+            0.0
+        }
     }
 
     /// Thermal-noise σ0 as a linear value, `None` when the noise is disabled.

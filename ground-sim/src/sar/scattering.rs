@@ -15,6 +15,14 @@
 //!
 //! With `S = γ·sqrt(A/4π)` (eq 1) the facet's mean radar cross-section is `|γ|²·A`, so
 //! `⟨|γ_pq|²⟩` is the facet's σ0.
+//!
+//! Beyond the paper, an optional diffuse term `σ0_d·cos θ` ([`TwoScaleModel::diffuse_sigma0`],
+//! off by default) adds the Moon's non-directional echo (wavelength-scale rocks and the
+//! regolith's volume), which the two-scale model lacks: with its Gaussian SPM spectrum the
+//! paper's σ0 falls to −40 dB at 59° local incidence, below any real radar's noise, so a
+//! 33° wall facing away from the radar vanishes under NESZ −25 dB. The term is added in power
+//! to each local channel (independent Gaussian scatterers sum to one Gaussian of the summed
+//! power), so each facet still draws one `g`; see docs/insar.md, "Diffuse scattering".
 
 use serde::{Deserialize, Serialize};
 
@@ -43,6 +51,10 @@ pub struct TwoScaleModel {
     pub spm_ks: f64,
     /// Wavenumber k = 2π/λ, rad/m (kept for reference; SPM depends only on kL and kδ).
     pub wavenumber_rad_m: f64,
+    /// Diffuse σ0 at normal incidence, linear, of the `σ0_d·cos θ` law added to both
+    /// co-polarised channels (0 = none, the paper's model).
+    #[serde(default)]
+    pub diffuse_sigma0: f64,
 }
 
 impl TwoScaleModel {
@@ -54,7 +66,13 @@ impl TwoScaleModel {
             spm_kl: cfg.spm_kl,
             spm_ks: cfg.spm_ks,
             wavenumber_rad_m: 2.0 * std::f64::consts::PI * cfg.carrier_hz / SPEED_OF_LIGHT_M_S,
+            diffuse_sigma0: cfg.diffuse_sigma0_linear(),
         }
+    }
+
+    /// Diffuse σ0 at local incidence `theta` (rad), linear: `σ0_d·cos θ` (0 when off).
+    pub fn sigma0_diffuse(&self, theta: f64) -> f64 {
+        self.diffuse_sigma0 * theta.cos().max(0.0)
     }
 
     /// KA amplitude factor (eqs 5, 6; the same for HH and VV): the normal-incidence Fresnel
@@ -144,12 +162,13 @@ impl TwoScaleModel {
         }
     }
 
-    /// Mean σ0 of the two-scale model (the regime's closed form), linear.
+    /// Mean σ0 of the two-scale model (the regime's closed form) plus the diffuse term, linear.
     pub fn sigma0(&self, pol: Polarisation, theta: f64) -> f64 {
-        match Self::regime(theta, self.switch_angle_rad(pol)) {
+        let directional = match Self::regime(theta, self.switch_angle_rad(pol)) {
             Regime::Kirchhoff => self.sigma0_ka(pol, theta),
             Regime::SmallPerturbation => self.sigma0_spm(pol, theta),
-        }
+        };
+        directional + self.sigma0_diffuse(theta)
     }
 
     /// Precompute the per-channel switch angles for facet evaluation.
@@ -180,8 +199,18 @@ impl FacetEvaluator {
             Regime::Kirchhoff => m.ka_amplitude() * m.ka_w2(theta).sqrt(),
             Regime::SmallPerturbation => spm_a * m.spm_w2(theta).sqrt(),
         };
-        let a_hh = local(self.switch_hh, m.spm_hh(theta));
-        let a_vv = local(self.switch_vv, m.spm_vv(theta));
+        // The diffuse power joins each local channel's power; the sign of the directional
+        // amplitude is kept (SPM HH is negative).
+        let d = m.sigma0_diffuse(theta);
+        let with_diffuse = |a: f64| {
+            if d > 0.0 {
+                a.signum() * (a * a + d).sqrt()
+            } else {
+                a
+            }
+        };
+        let a_hh = with_diffuse(local(self.switch_hh, m.spm_hh(theta)));
+        let a_vv = with_diffuse(local(self.switch_vv, m.spm_vv(theta)));
         // U⁻¹(Δ)·diag(a, b)·U(Δ): the co-pol terms mix the local channels by cos²/sin².
         let (s, c) = delta.sin_cos();
         let hh = c * c * a_hh + s * s * a_vv;
@@ -286,6 +315,39 @@ mod tests {
             // VV above HH for SPM on a dielectric.
             assert!(vv * vv > hh * hh);
         }
+    }
+
+    #[test]
+    fn diffuse_term_adds_its_cos_law_to_both_channels() {
+        let cfg = SarConfig {
+            diffuse_sigma0_db: -17.0,
+            ..SarConfig::default()
+        };
+        let m = TwoScaleModel::from_config(&cfg);
+        let plain = model().facet_evaluator();
+        let ev = m.facet_evaluator();
+        let d0 = 10f64.powf(-1.7);
+        // The same draws as `ensemble_power`: their mean |g|² (≈ 1) scales both terms.
+        let g2 = (0..40_000)
+            .map(|i| complex_gaussian(7, 1, i).norm_sqr())
+            .sum::<f64>()
+            / 40_000.0;
+        for deg in [3.0_f64, 26.0, 59.0] {
+            let t = deg.to_radians();
+            for ch in 0..2 {
+                let want = ensemble_power(&plain, t, ch) + d0 * t.cos() * g2;
+                let got = ensemble_power(&ev, t, ch);
+                assert!(
+                    (got / want - 1.0).abs() < 1e-9,
+                    "{deg}° ch{ch}: {got} vs {want}"
+                );
+            }
+        }
+        // At 59° the paper's σ0 (≈ −40 dB HH) is far below the diffuse −19.9 dB.
+        let t = 59f64.to_radians();
+        let total = 10.0 * m.sigma0(Polarisation::HH, t).log10();
+        assert!((total + 19.9).abs() < 0.1, "{total}");
+        assert!(10.0 * model().sigma0(Polarisation::HH, t).log10() < -39.0);
     }
 
     #[test]
