@@ -149,15 +149,31 @@ impl Plot {
             let colour = Rgb(s.colour);
             match s.style {
                 Style::Line => {
+                    // Two pixels wide, with a dot on every data point, so that curves stay
+                    // readable on a printed page and sparse sweeps show where they were
+                    // measured.
                     for w in s.points.windows(2) {
                         let (a, c) = (w[0], w[1]);
                         if [a.0, a.1, c.0, c.1].iter().all(|v| v.is_finite()) {
-                            draw_line_segment_mut(
-                                &mut img,
-                                to_px(a.0, a.1),
-                                to_px(c.0, c.1),
-                                colour,
-                            );
+                            let (p, q) = (to_px(a.0, a.1), to_px(c.0, c.1));
+                            for (dx, dy) in [(0.0, 0.0), (1.0, 0.0), (0.0, 1.0)] {
+                                draw_line_segment_mut(
+                                    &mut img,
+                                    (p.0 + dx, p.1 + dy),
+                                    (q.0 + dx, q.1 + dy),
+                                    colour,
+                                );
+                            }
+                        }
+                    }
+                    if s.points.len() <= 40 {
+                        for &(x, y) in s
+                            .points
+                            .iter()
+                            .filter(|p| p.0.is_finite() && p.1.is_finite())
+                        {
+                            let (u, v) = to_px(x, y);
+                            draw_filled_circle_mut(&mut img, (u as i32, v as i32), 3, colour);
                         }
                     }
                 }
@@ -181,7 +197,15 @@ impl Plot {
             &self.x_label,
             ink,
         );
-        draw_text(&mut img, 4, top + ph + 4 + GLYPH + 8, &self.y_label, ink);
+        // The y label sits above the axis, between the title and the plot, clear of the
+        // x label.
+        draw_text(
+            &mut img,
+            4,
+            top.saturating_sub(GLYPH + 4),
+            &self.y_label,
+            ink,
+        );
         // Legend, top right inside the axes.
         let mut ly = top + 6;
         for s in &self.series {
