@@ -269,6 +269,32 @@ pub struct LookFusion {
     pub east_only: f64,
     /// Fraction valid in the west pass only.
     pub west_only: f64,
+    /// Fraction valid in both passes whose heights disagree by more than
+    /// [`FUSE_CONSISTENCY_SIGMAS`] combined CRLBs; dropped (labelled low coherence).
+    pub inconsistent: f64,
+}
+
+/// Two looks' heights of one cell that differ by more than this many combined per-cell CRLBs
+/// are not fused but dropped: the bound is conservative (the filtered DEM's error is ≈ 0.6 of
+/// it, docs/insar.md), so agreeing measurements pass at ≈ 6σ, while a wrong 2π cycle in one
+/// look (183 m for the 32 m boom, 733 m for the paper's) is caught wherever the bounds are
+/// below ≈ 30 m.
+pub const FUSE_CONSISTENCY_SIGMAS: f64 = 4.0;
+
+/// Whether two looks' heights `a`, `b` (m) with per-cell bounds `sa`, `sb` (m) differ by more
+/// than [`FUSE_CONSISTENCY_SIGMAS`] combined bounds. A bound below 1 m counts as 1 m (the DEM
+/// filter and the range bias between the looks are of that order); a missing bound never
+/// disagrees.
+pub fn looks_disagree(a: f32, b: f32, sa: f32, sb: f32) -> bool {
+    let bound = |s: f32| {
+        let s = f64::from(s);
+        if s.is_finite() {
+            s.max(1.0)
+        } else {
+            f64::INFINITY
+        }
+    };
+    (f64::from(a) - f64::from(b)).abs() > FUSE_CONSISTENCY_SIGMAS * bound(sa).hypot(bound(sb))
 }
 
 /// Run the InSAR chain on `a1`, `a2` onto `grid`.
@@ -825,8 +851,9 @@ pub fn mirror_columns<T: Copy>(v: &[T], w: usize) -> Vec<T> {
 
 /// Fuse the west-looking pass `west` (computed on the mirrored scene, so its grid layers are
 /// mirrored here) into the east-looking `east`, cell by cell: a cell valid in both takes the
-/// inverse-variance mean of the two heights by their CRLB (and that variance's fused bound); a
-/// cell valid in one takes that one; a cell valid in neither keeps the worse label.
+/// inverse-variance mean of the two heights by their CRLB (and that variance's fused bound),
+/// unless they disagree beyond [`FUSE_CONSISTENCY_SIGMAS`], when it is dropped; a cell valid in
+/// one takes that one; a cell valid in neither keeps the worse label.
 pub fn fuse_looks(east: &mut InsarProduct, west: &InsarProduct) -> anyhow::Result<LookFusion> {
     let w = east.grid.width;
     let n = east.labels.len();
@@ -839,7 +866,7 @@ pub fn fuse_looks(east: &mut InsarProduct, west: &InsarProduct) -> anyhow::Resul
     let ws = mirror_columns(west.crlb_m.heights_m(), w);
     let wl = mirror_columns(&west.labels, w);
     let east_mask = east.mask;
-    let (mut both, mut e_only, mut w_only) = (0usize, 0usize, 0usize);
+    let (mut both, mut e_only, mut w_only, mut inconsistent) = (0usize, 0usize, 0usize, 0usize);
     let mut dem = east.dem.heights_m().to_vec();
     let mut coh = east.coherence.heights_m().to_vec();
     let mut sig = east.crlb_m.heights_m().to_vec();
@@ -847,6 +874,17 @@ pub fn fuse_looks(east: &mut InsarProduct, west: &InsarProduct) -> anyhow::Resul
         let ev = east.labels[i] == label::VALID && dem[i].is_finite();
         let wv = wl[i] == label::VALID && wd[i].is_finite();
         match (ev, wv) {
+            (true, true) if looks_disagree(dem[i], wd[i], sig[i], ws[i]) => {
+                // Two measurements of one height that differ by more than their errors allow:
+                // one of them took a wrong 2π cycle (or a sidelobe's phase); a mean of the two
+                // would be wrong by a fraction of a cycle that no mask shows, so neither is
+                // kept.
+                inconsistent += 1;
+                east.labels[i] = label::LOW_COHERENCE;
+                dem[i] = f32::NAN;
+                coh[i] = f32::NAN;
+                sig[i] = f32::NAN;
+            }
             (true, true) => {
                 both += 1;
                 // Inverse-variance weights; equal weights where a bound is missing.
@@ -890,6 +928,7 @@ pub fn fuse_looks(east: &mut InsarProduct, west: &InsarProduct) -> anyhow::Resul
         both_valid: frac(both),
         east_only: frac(e_only),
         west_only: frac(w_only),
+        inconsistent: frac(inconsistent),
     };
     east.look_fusion = Some(fusion);
     east.seconds += west.seconds;

@@ -633,3 +633,17 @@ fn recentring_moves_plane_heights_back_to_the_window_centres() {
     // Without passes nothing moves.
     assert_eq!(recentre_heights(&z, &valid, cols, step, &centroid, 0), z);
 }
+
+#[test]
+fn looks_that_differ_by_a_cycle_are_not_fused() {
+    use super::pipeline::looks_disagree;
+    // The 32 m boom's 183 m cycle between two 2 m-bound heights: one look slipped.
+    assert!(looks_disagree(-1500.0, -1683.0, 2.0, 2.0));
+    // A few metres apart with a few metres of bound: the same ground.
+    assert!(!looks_disagree(-1500.0, -1506.0, 2.0, 2.0));
+    // Tight bounds count as 1 m: 5 m apart still agrees, 6 m does not.
+    assert!(!looks_disagree(10.0, 15.0, 0.1, 0.1));
+    assert!(looks_disagree(10.0, 16.0, 0.1, 0.1));
+    // A missing bound never disagrees.
+    assert!(!looks_disagree(0.0, 500.0, f32::NAN, 2.0));
+}
