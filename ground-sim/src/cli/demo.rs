@@ -21,7 +21,7 @@ use ground_sim::flyer::frames::{FramePose, SensorModel};
 use ground_sim::flyer::onboard::Budget;
 use ground_sim::insar::InsarConfig;
 use ground_sim::insar::pipeline::{
-    LookDirections, fuse_looks, mirror_columns, process_simulated, run_from_dem,
+    LookDirections, fuse_looks, mirrored_dem, process_simulated, run_from_dem,
 };
 use ground_sim::insar::products::{InsarReport, RunContext, SarSummary, write_outputs};
 use ground_sim::reference::load;
@@ -171,16 +171,7 @@ pub fn run_demo(a: &Args) -> anyhow::Result<DemoSummary> {
     let (truth_grid, mut product) = process_simulated(&truth, &pair, pol, &cfg)?;
     if a.looks == LookDirections::Both {
         // The west-looking pass: the same radar over the mirrored scene, fused cell by cell.
-        let (w, h) = (truth.width(), truth.height());
-        let mut mirrored = ground_sim::dem::Dem::new(
-            w,
-            h,
-            mirror_columns(truth.heights_m(), w),
-            truth.geo.clone(),
-        )?;
-        mirrored.nodata = truth.nodata;
-        mirrored.sample = truth.sample;
-        let west = run_from_dem(&mirrored, &sar_cfg, pol, &cfg, !a.no_progress)?;
+        let west = run_from_dem(&mirrored_dem(&truth)?, &sar_cfg, pol, &cfg, !a.no_progress)?;
         fuse_looks(&mut product, &west.product)?;
     }
     let insar_dir = out.join("insar");

@@ -828,6 +828,14 @@ pub fn run_from_dem_looks(
     if looks == LookDirections::One {
         return Ok(east);
     }
+    let west = run_from_dem(&mirrored_dem(truth)?, sar, pol, cfg, progress)?;
+    fuse_looks(&mut east.product, &west.product)?;
+    Ok(east)
+}
+
+/// The scene mirrored left to right under the same georeference: what a west-looking pass of
+/// the east-looking radar sees ([`run_from_dem_looks`]).
+pub fn mirrored_dem(truth: &Dem) -> anyhow::Result<Dem> {
     let (w, h) = (truth.width(), truth.height());
     let mut mirrored = Dem::new(
         w,
@@ -837,9 +845,7 @@ pub fn run_from_dem_looks(
     )?;
     mirrored.nodata = truth.nodata;
     mirrored.sample = truth.sample;
-    let west = run_from_dem(&mirrored, sar, pol, cfg, progress)?;
-    fuse_looks(&mut east.product, &west.product)?;
-    Ok(east)
+    Ok(mirrored)
 }
 
 /// Each row of a row-major `w`-wide raster reversed.
