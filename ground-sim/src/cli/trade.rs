@@ -3,7 +3,7 @@
 //! and a short `eval` campaign flies the flight navigator against the tile. One JSON, one
 //! Markdown table, one picture (TRN success against NESZ, one curve per design).
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{Context, bail};
@@ -191,10 +191,7 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
                     let tag = format!(
                         "{}-{}-b{baseline_m}-{}",
                         scene.name,
-                        match looks {
-                            LookDirections::One => "one",
-                            LookDirections::Both => "both",
-                        },
+                        looks.name(),
                         if nesz.is_finite() {
                             format!("nesz{nesz}")
                         } else {
@@ -204,14 +201,13 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
                     let dir = a.out.join(&tag);
                     let hidden = indicatif::ProgressBar::hidden();
                     let (sr, rows) = run_scene(scene, &spec, &dir, &hidden)?;
-                    let crlb = read_crlb(&dir.join("insar").join("report.json"))?;
                     let row = rows.first().context("the point ran no campaign")?;
                     let p = TradePoint {
                         scene: scene.name.clone(),
                         nesz_db: nesz.is_finite().then_some(nesz),
                         baseline_m,
                         looks,
-                        crlb_height_m: crlb,
+                        crlb_height_m: sr.insar_crlb_height_m.unwrap_or(f64::NAN),
                         height_rmse_m: sr.insar_height_rmse_m.unwrap_or(f64::NAN),
                         slope_rmse_deg: sr.insar_slope_rmse_deg.unwrap_or(f64::NAN),
                         valid_fraction: sr.insar_valid_frac.unwrap_or(f64::NAN),
@@ -255,14 +251,6 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The RMS CRLB the InSAR report recorded.
-fn read_crlb(path: &Path) -> anyhow::Result<f64> {
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    let v: serde_json::Value = serde_json::from_str(&text)?;
-    Ok(v["crlb_height_m"].as_f64().unwrap_or(f64::NAN))
-}
-
 fn design_label(p: &TradePoint, many_scenes: bool) -> String {
     let looks = match p.looks {
         LookDirections::One => "1 look",
@@ -297,10 +285,7 @@ pub fn table_markdown(r: &TradeReport) -> String {
         s += &format!(
             "| {} | {} | {} m | {} | {:.2} m | {:.2} m ({:.2}) | {:.2}° | {:.1} % | {} | {:.1} % | {} | {} |\n",
             p.scene,
-            match p.looks {
-                LookDirections::One => "one",
-                LookDirections::Both => "both",
-            },
+            p.looks.name(),
             p.baseline_m,
             p.nesz_db.map_or("none".to_string(), |v| format!("{v} dB")),
             p.crlb_height_m,

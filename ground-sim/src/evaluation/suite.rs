@@ -225,6 +225,8 @@ pub struct SceneReport {
     pub insar_slope_rmse_deg: Option<f64>,
     /// Valid fraction of the InSAR product.
     pub insar_valid_frac: Option<f64>,
+    /// RMS per-pixel Cramér–Rao height bound the InSAR product reported, m.
+    pub insar_crlb_height_m: Option<f64>,
     /// Wall time of the scene (terrain, tiles, campaigns), s.
     pub seconds: f64,
 }
@@ -285,6 +287,7 @@ pub fn run_scene(
         insar_height_rmse_m: None,
         insar_slope_rmse_deg: None,
         insar_valid_frac: None,
+        insar_crlb_height_m: None,
         seconds: 0.0,
     };
     let mut rows = Vec::new();
@@ -330,6 +333,7 @@ pub fn run_scene(
                 report.insar_height_rmse_m = Some(r.accuracy.height_rmse_m);
                 report.insar_slope_rmse_deg = Some(r.accuracy.slope_rmse_deg);
                 report.insar_valid_frac = Some(r.accuracy.valid_fraction);
+                report.insar_crlb_height_m = Some(r.accuracy.crlb_height_m);
                 r.tile_features
             }
         };

@@ -256,6 +256,16 @@ pub enum LookDirections {
     Both,
 }
 
+impl LookDirections {
+    /// The name the CLI and the JSON use (`one`, `both`).
+    pub fn name(self) -> &'static str {
+        match self {
+            LookDirections::One => "one",
+            LookDirections::Both => "both",
+        }
+    }
+}
+
 /// How two look directions were fused on the output grid.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct LookFusion {

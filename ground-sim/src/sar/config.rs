@@ -122,7 +122,7 @@ pub struct SarConfig {
     /// Diffuse backscatter at normal incidence, dB, of a `σ0_d·cos θ` law added to the
     /// two-scale model (`-inf` = none, the paper's model and the default). Not in the paper:
     /// the Moon's non-directional echo, which dominates beyond ≈ 40° local incidence
-    /// (docs/insar.md, "Diffuse scattering", derives −17 dB from lunar radar measurements).
+    /// (docs/insar.md, "Walls under noise", derives −17 dB from lunar radar measurements).
     pub diffuse_sigma0_db: f64,
     /// Polarisations to simulate (1 or 2 of HH, VV).
     pub polarisations: Vec<Polarisation>,

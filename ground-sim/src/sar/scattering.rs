@@ -22,7 +22,7 @@
 //! paper's σ0 falls to −40 dB at 59° local incidence, below any real radar's noise, so a
 //! 33° wall facing away from the radar vanishes under NESZ −25 dB. The term is added in power
 //! to each local channel (independent Gaussian scatterers sum to one Gaussian of the summed
-//! power), so each facet still draws one `g`; see docs/insar.md, "Diffuse scattering".
+//! power), so each facet still draws one `g`; see docs/insar.md, "Walls under noise".
 
 use serde::{Deserialize, Serialize};
 
