@@ -21,6 +21,9 @@ struct Cli {
 enum Commands {
     /// Generate a synthetic lunar terrain preset as a GeoTIFF DEM (and pictures).
     Terrain(cli::terrain::Args),
+    /// A fine truth DEM around a landing target (rocks, small craters, sub-metre roughness)
+    /// over a coarse scene, with its truth safety map: GeoTIFF, PNG, JSON.
+    LandingZone(cli::landing::Args),
     /// Size, georeferencing, elevation and slope statistics of a DEM.
     Info(cli::info::Args),
     /// Resample a DEM to another pixel size and/or crop it by map coordinates.
@@ -76,6 +79,7 @@ fn main() -> ExitCode {
 fn dispatch(cli: Cli) -> anyhow::Result<()> {
     match &cli.command {
         Commands::Terrain(a) => cli::terrain::run(a),
+        Commands::LandingZone(a) => cli::landing::run(a),
         Commands::Info(a) => cli::info::run(a),
         Commands::Resample(a) => cli::resample::run(a),
         Commands::Demo(a) => cli::demo::run(a),

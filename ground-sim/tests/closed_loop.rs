@@ -155,5 +155,11 @@ fn tile_trn_eval_and_descent_on_a_generated_scene() {
     }
     assert!(s["fixes"].as_u64().unwrap() > 50, "{s}");
     assert!(s["landing_err_p95_m"].as_f64().unwrap() < 10.0, "{s}");
+    // Below the TRN floor the frames go to the keyframe odometry, over the landing zone laid
+    // around each target, on which every touchdown is judged.
+    assert!(s["keyframes"].as_u64().unwrap() >= 2, "{s}");
+    assert!(s["odometry_fixes"].as_u64().unwrap() > 20, "{s}");
+    assert_eq!(s["touchdowns_judged"], 2, "{s}");
+    assert!(s["last_aid_agl_p50_m"].as_f64().unwrap() < 200.0, "{s}");
     assert!(dir.path().join("descent-trajectory.png").exists());
 }

@@ -27,11 +27,14 @@
 use core::fmt;
 use nalgebra::{Matrix3, SMatrix, SVector, UnitQuaternion, Vector3};
 
-/// Error-state size: δp, δv, δθ, δb_a, δb_g (3 each) and the fix error δf (east, north, yaw).
-pub const STATE_DIM: usize = 18;
+/// Error-state size: δp, δv, δθ, δb_a, δb_g (3 each), the fix error δf (east, north, yaw) and
+/// the keyframe position δk (east, north).
+pub const STATE_DIM: usize = 20;
 type MatN = SMatrix<f64, STATE_DIM, STATE_DIM>;
 /// Index of the fix-error block in the error state.
 const FIX: usize = 15;
+/// Index of the keyframe-position block in the error state.
+const KEY: usize = 18;
 /// Largest footprint correlation used: a fix always carries some fresh error (the frame's own
 /// range noise is new each time), so its covariance never vanishes.
 pub const MAX_FIX_CORRELATION: f64 = 0.999;
@@ -123,6 +126,23 @@ pub struct FixMeasurement {
     pub footprint_m: f64,
 }
 
+/// A keyframe-relative fix (odometry): the flyer's horizontal displacement since the keyframe
+/// was captured ([`NavFilter::set_keyframe`]), in the navigation frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct OffsetMeasurement {
+    /// East displacement, m.
+    pub east_m: f64,
+    /// North displacement, m.
+    pub north_m: f64,
+    /// Covariance, m² (row-major 2 × 2, east/north).
+    pub cov_m2: [[f64; 2]; 2],
+    /// Side of the frame's footprint on the ground, m: successive offsets against the same
+    /// keyframe share that keyframe's own error, modelled like successive TRN fixes (see the
+    /// module docs) with the footprints' overlap as correlation.
+    pub footprint_m: f64,
+}
+
 /// Correlation of the errors of two fixes whose square footprints (centres in metres, sides
 /// `side_a`, `side_b` in metres) overlap: the shared area over the geometric mean of the two
 /// areas, in [0, [`MAX_FIX_CORRELATION`]]. 0 for disjoint footprints or a non-positive side.
@@ -195,6 +215,8 @@ pub struct NavFilter {
     fix_err: Vector3<f64>,
     /// Centre (east, north, m) and side (m) of the last fix's footprint; side 0: none yet.
     last_fix: ([f64; 2], f64),
+    /// Horizontal position (east, north, m) cloned at the current keyframe, if any.
+    key: Option<[f64; 2]>,
     cov: MatN,
     cfg: FilterConfig,
 }
@@ -238,6 +260,7 @@ impl NavFilter {
             bg: Vector3::zeros(),
             fix_err: Vector3::zeros(),
             last_fix: ([0.0; 2], 0.0),
+            key: None,
             cov,
             cfg,
         }
@@ -315,6 +338,7 @@ impl NavFilter {
         phi.fixed_view_mut::<3, 3>(6, 12).copy_from(&(-r * dt_s));
         let c = &self.cfg;
         // Diagonal process noise per 3-block: none on δp, then δv, δθ, δb_a, δb_g.
+        // The fix error and the keyframe clone (blocks 5 and 6) are static between updates.
         let blocks = [
             0.0,
             c.accel_noise * c.accel_noise * dt_s,
@@ -338,7 +362,7 @@ impl NavFilter {
         self.cov = (self.cov + self.cov.transpose()) * 0.5;
     }
 
-    /// Generic gated update: innovation `y` (M), measurement matrix `h` (M × 18), noise `r`.
+    /// Generic gated update: innovation `y` (M), measurement matrix `h` (M × [`STATE_DIM`]), noise `r`.
     fn update<const M: usize>(
         &mut self,
         y: SVector<f64, M>,
@@ -368,6 +392,10 @@ impl NavFilter {
         self.ba += dx.fixed_rows::<3>(9);
         self.bg += dx.fixed_rows::<3>(12);
         self.fix_err += dx.fixed_rows::<3>(FIX);
+        if let Some(k) = &mut self.key {
+            k[0] += at(&dx, KEY, 0);
+            k[1] += at(&dx, KEY + 1, 0);
+        }
         Ok(UpdateOutcome::Accepted { nis })
     }
 
@@ -410,14 +438,31 @@ impl NavFilter {
         if cf.cholesky().is_none() {
             return Err(FilterError::Singular);
         }
-        let rho = footprint_correlation(
-            self.last_fix.0,
-            self.last_fix.1,
-            [z.x_m, z.y_m],
-            z.footprint_m,
+        let shared = self.move_fix_error([z.x_m, z.y_m], z.footprint_m, &cf);
+        let y = SVector::<f64, 3>::new(
+            z.x_m - self.p.x - self.fix_err.x,
+            z.y_m - self.p.y - self.fix_err.y,
+            wrap_pi(z.yaw_rad - self.yaw_rad() - self.fix_err.z),
         );
-        self.last_fix = ([z.x_m, z.y_m], z.footprint_m.max(0.0));
-        // Gauss–Markov step of the fix error: rows and columns of its block scale by ρ.
+        // x, y observe δp_x + δf_x, δp_y + δf_y; yaw responds to the nav-frame rotation error
+        // about +z (level flight) plus δf_ψ. The frame's own share of the noise is white.
+        let h = SMatrix::<f64, 3, STATE_DIM>::from_fn(|i, j| match (i, j) {
+            (0, 0) | (1, 1) | (2, 8) => 1.0,
+            (i, j) if j == FIX + i => 1.0,
+            _ => 0.0,
+        });
+        let r = cf * (1.0 - shared);
+        let r = SMatrix::<f64, 3, 3>::from_fn(|i, j| r.get((i, j)).copied().unwrap_or(0.0));
+        self.update(y, h, r, self.cfg.fix_gate_chi2)
+    }
+
+    /// Gauss–Markov step of the fix error to a new footprint (centre east/north m, side m) for a
+    /// measurement of covariance `cf` (east, north, yaw): rows and columns of its block scale by
+    /// the footprints' overlap ρ and fresh error `(1 − ρ²)·s·cf` is added. Returns the shared
+    /// fraction `s`.
+    fn move_fix_error(&mut self, centre: [f64; 2], footprint_m: f64, cf: &Matrix3<f64>) -> f64 {
+        let rho = footprint_correlation(self.last_fix.0, self.last_fix.1, centre, footprint_m);
+        self.last_fix = (centre, footprint_m.max(0.0));
         for i in 0..STATE_DIM {
             for k in 0..3 {
                 if let Some(v) = self.cov.get_mut((FIX + k, i)) {
@@ -434,20 +479,98 @@ impl NavFilter {
         block += fresh;
         self.fix_err *= rho;
         self.symmetrise();
-        let y = SVector::<f64, 3>::new(
-            z.x_m - self.p.x - self.fix_err.x,
-            z.y_m - self.p.y - self.fix_err.y,
-            wrap_pi(z.yaw_rad - self.yaw_rad() - self.fix_err.z),
+        shared
+    }
+
+    /// Capture a keyframe: the current horizontal position (and its error) is cloned into the
+    /// keyframe state, replacing any earlier keyframe, and the fix-error process restarts (the
+    /// next offset's ground error is the new keyframe's, independent of the last fix's).
+    /// Offsets ([`Self::update_offset`]) are then measured from this position.
+    pub fn set_keyframe(&mut self) {
+        // δk := δp (east, north): copy rows and columns, then the 2 × 2 block.
+        for i in 0..STATE_DIM {
+            for k in 0..2 {
+                let v = at(&self.cov, k, i);
+                if let Some(d) = self.cov.get_mut((KEY + k, i)) {
+                    *d = v;
+                }
+                if let Some(d) = self.cov.get_mut((i, KEY + k)) {
+                    *d = v;
+                }
+            }
+        }
+        for a in 0..2 {
+            for b in 0..2 {
+                let v = at(&self.cov, a, b);
+                if let Some(d) = self.cov.get_mut((KEY + a, KEY + b)) {
+                    *d = v;
+                }
+            }
+        }
+        self.key = Some([self.p.x, self.p.y]);
+        self.last_fix = ([0.0; 2], 0.0);
+        self.symmetrise();
+    }
+
+    /// Horizontal position cloned at the current keyframe (east, north, m), if one was set.
+    pub fn keyframe_position_m(&self) -> Option<[f64; 2]> {
+        self.key
+    }
+
+    /// Covariance of the displacement since the keyframe, `p − p_k` (east/north, m²): what the
+    /// filter knows about where the current frame lies on the keyframe. `None` without a
+    /// keyframe.
+    pub fn offset_cov_m2(&self) -> Option<[[f64; 2]; 2]> {
+        self.key?;
+        let c = &self.cov;
+        let e = |a: usize, b: usize| {
+            at(c, a, b) - at(c, a, KEY + b) - at(c, KEY + a, b) + at(c, KEY + a, KEY + b)
+        };
+        Some([[e(0, 0), e(0, 1)], [e(1, 0), e(1, 1)]])
+    }
+
+    /// Update with a keyframe-relative fix (odometry). Gated at `fix_gate_chi2` (on 2 dof that
+    /// is stricter than its 3-dof meaning, never looser). Like a TRN fix, the share
+    /// [`FilterConfig::fix_shared_fraction`] of its covariance is carried as ground error
+    /// correlated over overlapping footprints (here: the keyframe's own error, common to every
+    /// frame registered on it). `Err(NotFinite)` without a keyframe.
+    pub fn update_offset(&mut self, z: &OffsetMeasurement) -> Result<UpdateOutcome, FilterError> {
+        let c = z.cov_m2;
+        let vals = [
+            z.east_m,
+            z.north_m,
+            c[0][0],
+            c[0][1],
+            c[1][0],
+            c[1][1],
+            z.footprint_m,
+        ];
+        let Some(key) = self.key else {
+            return Err(FilterError::NotFinite);
+        };
+        if !vals.iter().all(|v| v.is_finite()) {
+            return Err(FilterError::NotFinite);
+        }
+        let cxy = 0.5 * (c[0][1] + c[1][0]);
+        let c2 = nalgebra::Matrix2::new(c[0][0], cxy, cxy, c[1][1]);
+        if c2.cholesky().is_none() {
+            return Err(FilterError::Singular);
+        }
+        let cf = Matrix3::new(c[0][0], cxy, 0.0, cxy, c[1][1], 0.0, 0.0, 0.0, 0.0);
+        let centre = [self.p.x, self.p.y];
+        let shared = self.move_fix_error(centre, z.footprint_m, &cf);
+        let y = SVector::<f64, 2>::new(
+            z.east_m - (self.p.x - key[0]) - self.fix_err.x,
+            z.north_m - (self.p.y - key[1]) - self.fix_err.y,
         );
-        // x, y observe δp_x + δf_x, δp_y + δf_y; yaw responds to the nav-frame rotation error
-        // about +z (level flight) plus δf_ψ. The frame's own share of the noise is white.
-        let h = SMatrix::<f64, 3, STATE_DIM>::from_fn(|i, j| match (i, j) {
-            (0, 0) | (1, 1) | (2, 8) => 1.0,
+        let h = SMatrix::<f64, 2, STATE_DIM>::from_fn(|i, j| match (i, j) {
+            (0, 0) | (1, 1) => 1.0,
             (i, j) if j == FIX + i => 1.0,
+            (i, j) if j == KEY + i => -1.0,
             _ => 0.0,
         });
-        let r = cf * (1.0 - shared);
-        let r = SMatrix::<f64, 3, 3>::from_fn(|i, j| r.get((i, j)).copied().unwrap_or(0.0));
+        let r = c2 * (1.0 - shared);
+        let r = SMatrix::<f64, 2, 2>::from_fn(|i, j| r.get((i, j)).copied().unwrap_or(0.0));
         self.update(y, h, r, self.cfg.fix_gate_chi2)
     }
 

@@ -24,3 +24,10 @@ pub const MAX_MATCHES: usize = 128;
 
 /// The navigator workspace of the flight configuration (≈ 0.3 MB; a `static` on the target).
 pub type Workspace = NavWorkspace<MAX_FRAME_PX, MAX_FRAME_WIDTH, MAX_KEYPOINTS, MAX_MATCHES>;
+
+/// Bytes of the flight keyframe (one 200 × 200 px frame binned by 2, its keypoints, header and
+/// CRC): [`crate::odometry::keyframe_bytes`].
+pub const KEYFRAME_BYTES: usize = crate::odometry::keyframe_bytes(MAX_FRAME_PX, MAX_KEYPOINTS);
+
+/// The keyframe of the flight configuration (≈ 25 KB; a `static` on the target).
+pub type Keyframe = crate::odometry::Keyframe<KEYFRAME_BYTES>;

@@ -24,6 +24,9 @@
 //!    consensus confirmed, contradicted fixes refused.
 //! 10. [`navigator::Navigator`]: one call per frame with a caller-owned [`navigator::NavWorkspace`].
 //! 11. [`filter::NavFilter`]: error-state Kalman filter fusing IMU propagation with the fixes.
+//! 12. [`odometry`]: below the tile's reach, frames located on a keyframe (an earlier frame of
+//!     the flyer's own, turned into a tile in RAM) with the same navigator; the displacement
+//!     goes to the filter as a relative measurement against its cloned keyframe position.
 //!
 //! ## Rules this crate keeps
 //!
@@ -66,6 +69,7 @@ pub mod integral;
 pub mod matching;
 pub mod msac;
 pub mod navigator;
+pub mod odometry;
 pub mod pose;
 pub mod refine;
 pub mod rng;

@@ -206,6 +206,16 @@ impl<const MAX_PX: usize, const MAX_W: usize, const MAX_KP: usize, const MAX_MAT
     pub const fn footprint_bytes() -> usize {
         core::mem::size_of::<Self>()
     }
+    /// The slope buffer, SURF scratch and feature list, borrowed apart (keyframe capture).
+    pub(crate) fn parts_mut(
+        &mut self,
+    ) -> (
+        &mut SlopeBuffer<MAX_PX>,
+        &mut SurfWorkspace<MAX_PX, MAX_W>,
+        &mut Features<MAX_KP>,
+    ) {
+        (&mut self.slope, &mut self.surf, &mut self.features)
+    }
     /// The frame features of the last call (frame pixel coordinates).
     pub fn features(&self) -> &Features<MAX_KP> {
         &self.features

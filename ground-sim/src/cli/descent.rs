@@ -12,10 +12,11 @@ use ground_sim::evaluation::descent::{DescentConfig, DescentRecord, RunResult, f
 use ground_sim::evaluation::shard::{
     CampaignInputs, SHARD_FORMAT, SHARD_VERSION, Shard, ShardFile,
 };
-use ground_sim::flyer::frames::{centre_extent, frame_reach_m};
+use ground_sim::flyer::frames::{Terrain, centre_extent, frame_reach_m};
 use ground_sim::flyer::onboard::{Budget, WORKSPACE_STACK, new_workspace};
 use ground_sim::pictures::plot::{Plot, Series, Style};
 use ground_sim::reference::load;
+use ground_sim::terrain::landing::{LandingZoneConfig, landing_zone};
 use nav_core::{NavConfig, Navigator, Tile};
 use rand::{RngExt, SeedableRng};
 use rayon::prelude::*;
@@ -51,6 +52,18 @@ pub struct Args {
     /// Fly without the star tracker.
     #[arg(long)]
     pub no_star_tracker: bool,
+    /// Fly over the coarse map alone: no fine landing zone (rocks, small craters, sub-metre
+    /// roughness; `ground-sim landing-zone`) laid around each target.
+    #[arg(long)]
+    pub no_landing_zone: bool,
+    /// Stone cover of the landing zones: the Golombek & Rapp k (fraction of the ground covered
+    /// by rocks of any size).
+    #[arg(long, default_value_t = ground_sim::terrain::landing::DEFAULT_ROCK_K)]
+    pub rock_k: f64,
+    /// No keyframe odometry below the TRN floor (2 km): the final phase flies on the IMU and
+    /// whatever other aiding is on, as before odometry existed.
+    #[arg(long)]
+    pub no_odometry: bool,
     /// Summary JSON (with `--shard`: the shard file).
     #[arg(long)]
     pub json: PathBuf,
@@ -77,6 +90,9 @@ pub struct DescentSpec {
     pub budget: Budget,
     /// Scenario and vehicle settings.
     pub config: DescentConfig,
+    /// The landing zones laid around each target (`None`: the coarse map alone).
+    #[serde(default)]
+    pub landing_zone: Option<LandingZoneConfig>,
 }
 
 /// A shard file of `descent`: the campaign spec and one record per hop.
@@ -108,10 +124,38 @@ pub struct DescentSummary {
     pub rejected_fixes: usize,
     /// Frames without a fix.
     pub no_fixes: usize,
-    /// Fraction of frame times with the horizontal NEES in the 95 % χ²(2) band.
+    /// Odometry offsets accepted by the filter (all runs).
+    pub odometry_fixes: usize,
+    /// Odometry offsets rejected by the filter's gate.
+    pub odometry_rejected: usize,
+    /// Odometry frames without a fix on their keyframe.
+    pub odometry_none: usize,
+    /// Keyframes captured (all runs).
+    pub keyframes: usize,
+    /// Mean NEES of the odometry offsets against the truth displacement under their own
+    /// covariance (2 if it is right; NaN without offsets).
+    pub offset_nees_mean: f64,
+    /// Fraction of the offsets with their NEES in the 95 % χ²(2) band.
+    pub offsets_in_band_frac: f64,
+    /// Runs whose touchdown spot could be judged on the truth landing zone.
+    pub touchdowns_judged: usize,
+    /// Of those, the fraction that touched down on a safe spot.
+    pub safe_landing_frac: f64,
+    /// Mean over runs of the safe fraction of the ground within 10 m of the target (truth).
+    pub target_area_safe_frac: f64,
+    /// The landing zones' settings (`null`: none).
+    pub landing_zone: Option<LandingZoneConfig>,
+    /// Median height above terrain of each run's last accepted fix or offset, m.
+    pub last_aid_agl_p50_m: f64,
+    /// Median time from each run's last accepted fix or offset to touchdown, s.
+    pub unaided_p50_s: f64,
+    /// Fraction of frame times with with the horizontal NEES in the 95 % χ²(2) band.
     pub nees_in_band_frac: f64,
     /// Mean horizontal NEES over all runs (2 for a consistent filter).
     pub nees_mean: f64,
+    /// Fraction of the final phase's frame times (below the TRN floor) with the horizontal NEES
+    /// in the 95 % band.
+    pub final_nees_in_band_frac: f64,
     /// Mean hop length, m.
     pub hop_mean_m: f64,
     /// Mean flight time, s.
@@ -145,6 +189,7 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         } else {
             d.star_tracker_sigma_rad
         },
+        odometry: !a.no_odometry,
         ..d
     };
     // Release points and targets: inside the DEM, a cruise frame's reach from the edges.
@@ -160,6 +205,10 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         );
     }
     let hop_max = cfg.hop_max_m.min(0.9 * diag);
+    let zone_cfg = (!a.no_landing_zone).then(|| LandingZoneConfig {
+        rock_k: a.rock_k,
+        ..LandingZoneConfig::default()
+    });
     let nav = Navigator::new(tile, NavConfig::default());
     let pool = rayon::ThreadPoolBuilder::new()
         .stack_size(WORKSPACE_STACK)
@@ -195,7 +244,19 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
                         }
                     }
                     let (r, t) = pick.ok_or_else(|| anyhow!("run {i}: no hop fits the DEM"))?;
-                    let out = fly(i, &dem, &nav, ws, &cfg, r, t, rng.random::<u64>());
+                    let fly_seed = rng.random::<u64>();
+                    let zone = match &zone_cfg {
+                        Some(z) => Some(
+                            landing_zone(&dem, t, z, rng.random::<u64>())
+                                .with_context(|| format!("run {i}: landing zone"))?,
+                        ),
+                        None => None,
+                    };
+                    let terrain = Terrain {
+                        map: &dem,
+                        zone: zone.as_ref(),
+                    };
+                    let out = fly(i, &terrain, &nav, ws, &cfg, r, t, fly_seed);
                     pb.set_position(done.fetch_add(1, Ordering::Relaxed) as u64 + 1);
                     // Run 0 is the pictured one: keep its history.
                     out.map(|r| DescentRecord::new(r, i == 0))
@@ -210,6 +271,7 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         seed: a.seed,
         budget: a.budget.budget,
         config: cfg,
+        landing_zone: zone_cfg,
     };
     if a.shard.shard.is_none() {
         let dir = a
@@ -280,8 +342,62 @@ pub fn report(
         fixes: per_run.iter().map(|r| r.fixes).sum(),
         rejected_fixes: per_run.iter().map(|r| r.rejected_fixes).sum(),
         no_fixes: per_run.iter().map(|r| r.no_fixes).sum(),
+        odometry_fixes: per_run.iter().map(|r| r.odometry_fixes).sum(),
+        odometry_rejected: per_run.iter().map(|r| r.odometry_rejected).sum(),
+        odometry_none: per_run.iter().map(|r| r.odometry_none).sum(),
+        keyframes: per_run.iter().map(|r| r.keyframes).sum(),
+        offset_nees_mean: {
+            let n: usize = per_run
+                .iter()
+                .map(|r| r.odometry_fixes + r.odometry_rejected)
+                .sum();
+            per_run.iter().map(|r| r.offset_nees_sum).sum::<f64>() / n as f64
+        },
+        offsets_in_band_frac: {
+            let n: usize = per_run
+                .iter()
+                .map(|r| r.odometry_fixes + r.odometry_rejected)
+                .sum();
+            per_run.iter().map(|r| r.offsets_in_band).sum::<usize>() as f64 / n as f64
+        },
+        touchdowns_judged: per_run
+            .iter()
+            .filter(|r| r.touchdown_safe.is_some())
+            .count(),
+        safe_landing_frac: per_run
+            .iter()
+            .filter(|r| r.touchdown_safe == Some(true))
+            .count() as f64
+            / per_run
+                .iter()
+                .filter(|r| r.touchdown_safe.is_some())
+                .count() as f64,
+        target_area_safe_frac: per_run
+            .iter()
+            .map(|r| r.target_area_safe_frac)
+            .filter(|v| v.is_finite())
+            .sum::<f64>()
+            / per_run
+                .iter()
+                .filter(|r| r.target_area_safe_frac.is_finite())
+                .count() as f64,
+        landing_zone: spec.landing_zone,
+        last_aid_agl_p50_m: percentile(
+            &mut per_run.iter().map(|r| r.last_aid_agl_m).collect::<Vec<_>>(),
+            0.5,
+        ),
+        unaided_p50_s: percentile(
+            &mut per_run.iter().map(|r| r.unaided_s).collect::<Vec<_>>(),
+            0.5,
+        ),
         nees_in_band_frac: in_band as f64 / samples.max(1) as f64,
         nees_mean: nees_sum / samples.max(1) as f64,
+        final_nees_in_band_frac: per_run.iter().map(|r| r.final_nees_in_band).sum::<usize>() as f64
+            / per_run
+                .iter()
+                .map(|r| r.final_samples)
+                .sum::<usize>()
+                .max(1) as f64,
         hop_mean_m: per_run.iter().map(|r| r.hop_m).sum::<f64>() / per_run.len() as f64,
         flight_mean_s: per_run.iter().map(|r| r.flight_s).sum::<f64>() / per_run.len() as f64,
         config: spec.config,
@@ -300,9 +416,33 @@ pub fn report(
         "navigation   RMS {:.2} m; fixes {} accepted, {} rejected by the gate, {} frames without a fix",
         summary.nav_err_rms_m, summary.fixes, summary.rejected_fixes, summary.no_fixes
     );
+    if summary.config.odometry {
+        println!(
+            "odometry     {} offsets accepted, {} rejected by the gate, {} frames without one; {} keyframes\n             offsets vs truth: mean NEES {:.2} (2 if their σ is right), {:.1} % in the 95 % band",
+            summary.odometry_fixes,
+            summary.odometry_rejected,
+            summary.odometry_none,
+            summary.keyframes,
+            summary.offset_nees_mean,
+            100.0 * summary.offsets_in_band_frac
+        );
+    }
+    if summary.touchdowns_judged > 0 {
+        println!(
+            "touchdown    {:.1} % of {} runs on safe ground (the ground within 10 m of the targets is {:.1} % safe)",
+            100.0 * summary.safe_landing_frac,
+            summary.touchdowns_judged,
+            100.0 * summary.target_area_safe_frac
+        );
+    }
     println!(
-        "consistency  {:.1} % of horizontal NEES values in the 95 % band",
-        summary.nees_in_band_frac * 100.0
+        "last aid     median {:.0} m above the terrain, {:.0} s before touchdown",
+        summary.last_aid_agl_p50_m, summary.unaided_p50_s
+    );
+    println!(
+        "consistency  {:.1} % of horizontal NEES values in the 95 % band ({:.1} % in the final phase)",
+        summary.nees_in_band_frac * 100.0,
+        summary.final_nees_in_band_frac * 100.0
     );
     super::write_json(json, &summary)?;
     println!("json         {}", json.display());

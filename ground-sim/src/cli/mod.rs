@@ -7,6 +7,7 @@ pub mod descent;
 pub mod eval;
 pub mod info;
 pub mod insar;
+pub mod landing;
 pub mod merge;
 pub mod navmap;
 pub mod register;

@@ -7,15 +7,58 @@
 //! east towards north; the flyer stays level. The sensor looks down with columns along body x,
 //! so a frame's heading (clockwise from east) is −ψ.
 
-use nav_core::filter::{FilterConfig, FixMeasurement, InitialState, NavFilter, UpdateOutcome};
+use nav_core::filter::{
+    FilterConfig, FixMeasurement, InitialState, NavFilter, OffsetMeasurement, UpdateOutcome,
+};
+use nav_core::odometry::KeyframePose;
 use nav_core::{Navigator, Prior};
 use rand::{RngExt, SeedableRng};
 use serde::{Deserialize, Serialize};
 
-use crate::dem::Dem;
 use crate::evaluation::shard::f64_or_nan;
-use crate::flyer::frames::{FramePose, SensorModel, height_at_geo, synth_frame};
-use crate::flyer::onboard::{FrameInput, Workspace, run_frame};
+use crate::flyer::frames::{FramePose, SensorModel, Terrain, synth_frame_on};
+use crate::flyer::onboard::{
+    FrameInput, GroundKeyframe, Workspace, capture_keyframe, run_frame, run_odometry,
+};
+use crate::terrain::landing::{SafetyThresholds, site_safety};
+
+/// Radius around the target over which [`RunResult::target_area_safe_frac`] is taken, m: about
+/// the landing error a flyer without hazard avoidance makes (p95 of a few metres) plus the
+/// guidance's own spread.
+pub const TARGET_AREA_RADIUS_M: f64 = 10.0;
+
+/// Fraction of the 1 m lattice sites within `radius_m` of `centre` that are safe on `zone`
+/// (NaN if none can be judged).
+pub fn area_safe_fraction(
+    zone: &crate::dem::Dem,
+    centre: [f64; 2],
+    radius_m: f64,
+    t: &SafetyThresholds,
+) -> f64 {
+    let n = radius_m.floor() as i64;
+    let (mut safe, mut all) = (0usize, 0usize);
+    for j in -n..=n {
+        for i in -n..=n {
+            let (dx, dy) = (i as f64, j as f64);
+            if dx.hypot(dy) > radius_m {
+                continue;
+            }
+            if let Some(s) = site_safety(zone, centre[0] + dx, centre[1] + dy, t) {
+                all += 1;
+                safe += usize::from(s.safe);
+            }
+        }
+    }
+    if all == 0 {
+        f64::NAN
+    } else {
+        safe as f64 / all as f64
+    }
+}
+
+/// Relative 1σ of a keyframe's pixel size: the ranging sensor's height above the terrain is
+/// known to about a metre at kilometres, i.e. 10⁻³ or better.
+pub const KEYFRAME_PIXEL_REL_SIGMA: f64 = 1e-3;
 
 /// Scenario and vehicle settings.
 #[derive(Debug, Clone, Copy, Serialize, Deserialize)]
@@ -36,6 +79,16 @@ pub struct DescentConfig {
     pub imu_rate_hz: f64,
     /// No TRN below this height above terrain (frames too fine for the tile), m.
     pub min_fix_agl_m: f64,
+    /// Below `min_fix_agl_m`, locate each frame on a keyframe of the flyer's own
+    /// ([`nav_core::odometry`]) and feed the displacement to the filter.
+    #[serde(default)]
+    pub odometry: bool,
+    /// No frames below this height above terrain, m (the last seconds before touchdown).
+    #[serde(default)]
+    pub min_frame_agl_m: f64,
+    /// Consecutive odometry frames without a fix after which a new keyframe is captured.
+    #[serde(default)]
+    pub odometry_max_misses: usize,
     /// Shortest hop, m.
     pub hop_min_m: f64,
     /// Longest hop, m.
@@ -72,6 +125,10 @@ impl Default for DescentConfig {
             frame_rate_hz: 1.0,
             imu_rate_hz: 100.0,
             min_fix_agl_m: 2000.0,
+            odometry: true,
+            // 30 m: frame pixels of 8 cm, finer than any landing-zone DEM the ground makes.
+            min_frame_agl_m: 30.0,
+            odometry_max_misses: 3,
             hop_min_m: 2000.0,
             hop_max_m: 15000.0,
             release_sigma_m: 100.0,
@@ -102,7 +159,8 @@ pub struct Sample {
     /// from JSON as NaN).
     #[serde(deserialize_with = "f64_or_nan")]
     pub nees: f64,
-    /// 0 no frame, 1 fix accepted, 2 fix rejected by the filter gate, 3 no fix.
+    /// 0 no frame, 1 fix accepted, 2 fix rejected by the filter gate, 3 no fix; odometry: 4
+    /// offset accepted, 5 offset rejected by the gate, 6 no offset, 7 keyframe captured.
     pub fix_state: u8,
     /// Fix position (if any), m.
     pub fix_m: Option<[f64; 2]>,
@@ -135,7 +193,7 @@ pub struct RunResult {
     /// Horizontal velocity error at the last accepted fix, m/s.
     #[serde(deserialize_with = "f64_or_nan")]
     pub vel_err_at_last_fix_mps: f64,
-    /// Time from the last accepted fix to touchdown, s.
+    /// Time from the last accepted fix or odometry offset to touchdown, s.
     #[serde(deserialize_with = "f64_or_nan")]
     pub unaided_s: f64,
     /// RMS horizontal navigation error over the flight (frame times), m.
@@ -147,12 +205,58 @@ pub struct RunResult {
     pub rejected_fixes: usize,
     /// Frames without a fix.
     pub no_fixes: usize,
+    /// Odometry offsets accepted by the filter.
+    #[serde(default)]
+    pub odometry_fixes: usize,
+    /// Odometry offsets rejected by the filter's gate.
+    #[serde(default)]
+    pub odometry_rejected: usize,
+    /// Odometry frames without a fix on the keyframe.
+    #[serde(default)]
+    pub odometry_none: usize,
+    /// Keyframes captured.
+    #[serde(default)]
+    pub keyframes: usize,
+    /// Σ over the offsets (all, before the filter's gate) of their NEES against the truth
+    /// displacement under their own covariance (χ²(2) if the covariance is right: mean 2).
+    #[serde(default)]
+    pub offset_nees_sum: f64,
+    /// Offsets whose NEES lies in the 95 % χ²(2) band.
+    #[serde(default)]
+    pub offsets_in_band: usize,
+    /// Whether the touchdown spot is safe by the truth landing zone
+    /// ([`crate::terrain::landing::site_safety`] with the default thresholds); `None` without a
+    /// zone or off it.
+    #[serde(default)]
+    pub touchdown_safe: Option<bool>,
+    /// Tilt of the ground plane under the touchdown footprint (truth), degrees.
+    #[serde(default, deserialize_with = "f64_or_nan")]
+    pub touchdown_slope_deg: f64,
+    /// Largest height above or below that plane in the footprint (truth), m.
+    #[serde(default, deserialize_with = "f64_or_nan")]
+    pub touchdown_relief_m: f64,
+    /// Fraction of safe sites within [`TARGET_AREA_RADIUS_M`] of the target (1 m lattice, truth):
+    /// the chance of a safe touchdown for a lander that does not look.
+    #[serde(default, deserialize_with = "f64_or_nan")]
+    pub target_area_safe_frac: f64,
+    /// Height above terrain of the last accepted measurement (fix or offset), m.
+    #[serde(default, deserialize_with = "f64_or_nan")]
+    pub last_aid_agl_m: f64,
     /// Fraction of frame times with the horizontal NEES inside the 95 % χ²(2) band.
     #[serde(deserialize_with = "f64_or_nan")]
     pub nees_in_band_frac: f64,
     /// Mean horizontal NEES (2 for a consistent filter; smaller: pessimistic covariance).
     #[serde(deserialize_with = "f64_or_nan")]
     pub nees_mean: f64,
+    /// Frame times below the TRN floor (`min_fix_agl_m`): the final phase.
+    #[serde(default)]
+    pub final_samples: usize,
+    /// Of those, frame times with the horizontal NEES inside the 95 % χ²(2) band.
+    #[serde(default)]
+    pub final_nees_in_band: usize,
+    /// Mean horizontal NEES over the final phase.
+    #[serde(default, deserialize_with = "f64_or_nan")]
+    pub final_nees_mean: f64,
     /// History at the frame rate.
     #[serde(skip)]
     pub history: Vec<Sample>,
@@ -230,11 +334,11 @@ fn normal(rng: &mut rand_pcg::Pcg64) -> f64 {
     (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
 }
 
-/// Fly one hop from `release` to `target` (east, north; metres).
+/// Fly one hop from `release` to `target` (east, north; metres) over `terrain`.
 #[allow(clippy::too_many_arguments)]
 pub fn fly(
     run: usize,
-    dem: &Dem,
+    terrain: &Terrain<'_>,
     nav: &Navigator<'_>,
     ws: &mut Workspace,
     cfg: &DescentConfig,
@@ -244,7 +348,7 @@ pub fn fly(
 ) -> anyhow::Result<RunResult> {
     let mut rng = rand_pcg::Pcg64::seed_from_u64(seed);
     let g = cfg.filter.gravity_mps2;
-    let ground = |x: f64, y: f64| height_at_geo(dem, x, y) as f64;
+    let ground = |x: f64, y: f64| terrain.height_at(x, y) as f64;
     let z0 = ground(release[0], release[1]);
     if !z0.is_finite() {
         anyhow::bail!("release point outside the DEM");
@@ -292,12 +396,31 @@ pub fn fly(
         fixes: 0,
         rejected_fixes: 0,
         no_fixes: 0,
+        odometry_fixes: 0,
+        odometry_rejected: 0,
+        odometry_none: 0,
+        keyframes: 0,
+        offset_nees_sum: 0.0,
+        offsets_in_band: 0,
+        last_aid_agl_m: f64::NAN,
+        touchdown_safe: None,
+        touchdown_slope_deg: f64::NAN,
+        touchdown_relief_m: f64::NAN,
+        target_area_safe_frac: f64::NAN,
         nees_in_band_frac: f64::NAN,
         nees_mean: f64::NAN,
+        final_samples: 0,
+        final_nees_in_band: 0,
+        final_nees_mean: f64::NAN,
         history: Vec::new(),
     };
     let max_steps = (1800.0 * cfg.imu_rate_hz) as usize;
     let mut landed = false;
+    let mut key = Box::new(GroundKeyframe::new());
+    let mut final_nees_sum = 0.0;
+    // The truth position of the keyframe, to score offsets (never seen by the flyer).
+    let mut key_truth = [0.0f64; 2];
+    let mut odo_misses = 0usize;
     for step in 1..=max_steps {
         let t = step as f64 * dt;
         // Yaw: the initial heading plus a slow ±10° sweep (exercises the gyro and rotation).
@@ -390,7 +513,7 @@ pub fn fly(
                 heading_rad: -yaw,
                 pixel_m,
             };
-            if let Ok(frame) = synth_frame(dem, &pose, &cfg.sensor, rng.random::<u64>()) {
+            if let Ok(frame) = synth_frame_on(terrain, &pose, &cfg.sensor, rng.random::<u64>()) {
                 let pe = filt.position_m();
                 let pc = filt.horizontal_cov_m2();
                 let prior = Prior {
@@ -437,6 +560,7 @@ pub fn fly(
                                 out.nav_err_at_last_fix_m = (p[0] - pe[0]).hypot(p[1] - pe[1]);
                                 out.vel_err_at_last_fix_mps = (v[0] - ve[0]).hypot(v[1] - ve[1]);
                                 out.unaided_s = t;
+                                out.last_aid_agl_m = agl;
                             }
                             UpdateOutcome::Rejected { .. } => {
                                 out.rejected_fixes += 1;
@@ -450,9 +574,98 @@ pub fn fly(
                     }
                 }
             }
+        } else if cfg.odometry && agl >= cfg.min_frame_agl_m {
+            let pixel_m = agl * cfg.ifov_rad;
+            let pose = FramePose {
+                x_m: p[0],
+                y_m: p[1],
+                heading_rad: -yaw,
+                pixel_m,
+            };
+            if let Ok(frame) = synth_frame_on(terrain, &pose, &cfg.sensor, rng.random::<u64>()) {
+                let input = (&frame.heights_m[..], frame.width, frame.height, pixel_m);
+                let yaw_sigma = filt.yaw_sigma_rad();
+                if key.needs_refresh(pixel_m) || odo_misses >= cfg.odometry_max_misses {
+                    let kp = KeyframePose {
+                        heading_rad: -filt.yaw_rad(),
+                        heading_sigma_rad: yaw_sigma,
+                        pixel_m,
+                        pixel_rel_sigma: KEYFRAME_PIXEL_REL_SIGMA,
+                    };
+                    let surf = th.surf_config();
+                    if capture_keyframe(ws, &mut key, input, &kp, &surf).is_ok() {
+                        filt.set_keyframe();
+                        key_truth = [p[0], p[1]];
+                        out.keyframes += 1;
+                        odo_misses = 0;
+                        fix_state = 7;
+                    }
+                } else if let (Some(k0), Some(kc)) =
+                    (filt.keyframe_position_m(), filt.offset_cov_m2())
+                {
+                    let pe = filt.position_m();
+                    let prior = key
+                        .prior(
+                            [pe[0] - k0[0], pe[1] - k0[1]],
+                            kc,
+                            -filt.yaw_rad(),
+                            yaw_sigma.max(0.5f64.to_radians()),
+                            pixel_m,
+                            KEYFRAME_PIXEL_REL_SIGMA,
+                        )
+                        .map_err(|e| anyhow::anyhow!("odometry: {e}"))?;
+                    let r = run_odometry(&key, nav.config(), ws, input, &prior)
+                        .map_err(|e| anyhow::anyhow!("odometry: {e}"))?;
+                    match r.offset {
+                        Some(o) => {
+                            // Scored against the truth displacement since the keyframe.
+                            let (tx, ty) = (p[0] - key_truth[0], p[1] - key_truth[1]);
+                            let n = nees2(o.east_m - tx, o.north_m - ty, o.cov_m2);
+                            out.offset_nees_sum += n;
+                            out.offsets_in_band += usize::from(NEES2_BAND_95.contains(&n));
+                            odo_misses = 0;
+                            fix_m = Some([k0[0] + o.east_m, k0[1] + o.north_m]);
+                            let m = OffsetMeasurement {
+                                east_m: o.east_m,
+                                north_m: o.north_m,
+                                cov_m2: o.cov_m2,
+                                footprint_m: o.footprint_m,
+                            };
+                            match filt
+                                .update_offset(&m)
+                                .map_err(|e| anyhow::anyhow!("filter: {e}"))?
+                            {
+                                UpdateOutcome::Accepted { .. } => {
+                                    out.odometry_fixes += 1;
+                                    out.last_aid_agl_m = agl;
+                                    out.unaided_s = t;
+                                    fix_state = 4;
+                                }
+                                UpdateOutcome::Rejected { .. } => {
+                                    out.odometry_rejected += 1;
+                                    fix_state = 5;
+                                }
+                            }
+                        }
+                        None => {
+                            odo_misses += 1;
+                            out.odometry_none += 1;
+                            fix_state = 6;
+                        }
+                    }
+                }
+            }
         }
         let pe = filt.position_m();
         let c = filt.horizontal_cov_m2();
+        if agl < cfg.min_fix_agl_m {
+            let n = nees2(p[0] - pe[0], p[1] - pe[1], c);
+            out.final_samples += 1;
+            out.final_nees_in_band += usize::from(NEES2_BAND_95.contains(&n));
+            if n.is_finite() {
+                final_nees_sum += n;
+            }
+        }
         out.history.push(Sample {
             t_s: t,
             truth_m: p,
@@ -468,6 +681,15 @@ pub fn fly(
     }
     let pe = filt.position_m();
     out.landing_err_m = (p[0] - target[0]).hypot(p[1] - target[1]);
+    if let Some(zone) = terrain.zone {
+        let t = SafetyThresholds::default();
+        if let Some(s) = site_safety(zone, p[0], p[1], &t) {
+            out.touchdown_safe = Some(s.safe);
+            out.touchdown_slope_deg = s.slope_deg;
+            out.touchdown_relief_m = s.relief_m;
+        }
+        out.target_area_safe_frac = area_safe_fraction(zone, target, TARGET_AREA_RADIUS_M, &t);
+    }
     out.nav_err_at_landing_m = (p[0] - pe[0]).hypot(p[1] - pe[1]);
     out.unaided_s = out.flight_s - out.unaided_s;
     let h = &out.history;
@@ -480,5 +702,6 @@ pub fn fly(
         .sqrt();
     out.nees_in_band_frac = h.iter().filter(|s| NEES2_BAND_95.contains(&s.nees)).count() as f64 / n;
     out.nees_mean = h.iter().map(|s| s.nees).sum::<f64>() / n;
+    out.final_nees_mean = final_nees_sum / out.final_samples.max(1) as f64;
     Ok(out)
 }

@@ -26,6 +26,28 @@ pub struct SensorModel {
     /// Samples per pixel side averaged over the footprint (a beam averages, a point sample
     /// would alias sub-pixel craters).
     pub subsamples: usize,
+    /// Frame pixel, metres, at and above which the range noise is `range_noise_m`; on finer
+    /// frames (closer to the ground) it shrinks in proportion to the pixel, i.e. to the range,
+    /// down to `range_noise_floor_m`. An assumption, stated: a ranging sensor's echo gets
+    /// stronger as it nears the ground, and a fixed 0.5 m would bury the 0.3 m relief that
+    /// matters for landing under noise. 0 keeps the noise fixed at every range.
+    #[serde(default)]
+    pub range_noise_ref_pixel_m: f64,
+    /// Smallest range noise 1σ, metres (the sensor's timing floor).
+    #[serde(default)]
+    pub range_noise_floor_m: f64,
+}
+
+impl SensorModel {
+    /// Range noise 1σ, metres, of a frame of `pixel_m` metres per pixel.
+    pub fn range_noise_at(&self, pixel_m: f64) -> f64 {
+        if self.range_noise_ref_pixel_m > 0.0 && pixel_m < self.range_noise_ref_pixel_m {
+            (self.range_noise_m * pixel_m / self.range_noise_ref_pixel_m)
+                .max(self.range_noise_floor_m)
+        } else {
+            self.range_noise_m
+        }
+    }
 }
 
 impl Default for SensorModel {
@@ -36,6 +58,10 @@ impl Default for SensorModel {
             range_noise_m: 0.5,
             dropout_frac: 0.005,
             subsamples: 2,
+            // At 5 m pixels and coarser (all TRN frames, 1.9 km and higher with the descent's
+            // sensor) the noise stays 0.5 m; the floor is a lidar's few-centimetre class.
+            range_noise_ref_pixel_m: 5.0,
+            range_noise_floor_m: 0.02,
         }
     }
 }
@@ -98,6 +124,34 @@ pub fn height_at_geo(dem: &Dem, x: f64, y: f64) -> f32 {
     top * (1.0 - fy) + bot * fy
 }
 
+/// The truth terrain a flyer sees: a map, optionally with a finer landing zone laid over part
+/// of it (where the zone has data, its heights win).
+#[derive(Debug, Clone, Copy)]
+pub struct Terrain<'a> {
+    /// The whole map.
+    pub map: &'a Dem,
+    /// A finer DEM over part of the map (e.g. rocks and small craters around a landing target).
+    pub zone: Option<&'a Dem>,
+}
+
+impl<'a> Terrain<'a> {
+    /// The map alone.
+    pub fn map(map: &'a Dem) -> Self {
+        Self { map, zone: None }
+    }
+    /// Bilinear height at geo `(x, y)`, metres: the zone's where it has one, else the map's (NaN
+    /// outside both).
+    pub fn height_at(&self, x: f64, y: f64) -> f32 {
+        if let Some(z) = self.zone {
+            let h = height_at_geo(z, x, y);
+            if h.is_finite() {
+                return h;
+            }
+        }
+        height_at_geo(self.map, x, y)
+    }
+}
+
 /// Synthesise the frame at `pose` from `dem`, with noise drawn from a PRNG seeded by `seed`.
 /// Errors if the DEM is not north-up or the frame leaves it.
 pub fn synth_frame(
@@ -106,7 +160,18 @@ pub fn synth_frame(
     sensor: &SensorModel,
     seed: u64,
 ) -> Result<Frame, DemError> {
-    if !dem.geo.transform.is_north_up() {
+    synth_frame_on(&Terrain::map(dem), pose, sensor, seed)
+}
+
+/// [`synth_frame`] over a [`Terrain`] (map plus landing zone).
+pub fn synth_frame_on(
+    terrain: &Terrain<'_>,
+    pose: &FramePose,
+    sensor: &SensorModel,
+    seed: u64,
+) -> Result<Frame, DemError> {
+    let north_up = |d: &Dem| d.geo.transform.is_north_up();
+    if !north_up(terrain.map) || !terrain.zone.is_none_or(north_up) {
         return Err(DemError::Unsupported(
             "frame synthesis needs a north-up DEM".into(),
         ));
@@ -124,6 +189,7 @@ pub fn synth_frame(
         let v: f64 = rng.random::<f64>();
         (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
     };
+    let sigma_m = sensor.range_noise_at(pose.pixel_m);
     let mut z = vec![0.0f32; w * h];
     for row in 0..h {
         for col in 0..w {
@@ -135,7 +201,7 @@ pub fn synth_frame(
                         (j as f64 + 0.5) / k as f64 - 0.5,
                     );
                     let (x, y) = pose.frame_to_geo(col as f64 + di, row as f64 + dj, w, h);
-                    acc += height_at_geo(dem, x, y) as f64;
+                    acc += terrain.height_at(x, y) as f64;
                 }
             }
             if acc.is_nan() {
@@ -147,7 +213,7 @@ pub fn synth_frame(
                     pose.pixel_m
                 )));
             }
-            let noise = sensor.range_noise_m * normal(&mut rng);
+            let noise = sigma_m * normal(&mut rng);
             let lost = rng.random::<f64>() < sensor.dropout_frac;
             z[row * w + col] = if lost {
                 f32::NAN

@@ -9,7 +9,13 @@
 use std::time::Instant;
 
 use nav_core::frame::SlopePx;
-use nav_core::{DemPatch, FrameReport, NavError, NavWorkspace, Navigator, Prior, SlopeImage};
+use nav_core::odometry::{
+    Keyframe, KeyframePose, OdometryError, OdometryReport, keyframe_bytes, locate_on_keyframe,
+};
+use nav_core::surf::SurfConfig;
+use nav_core::{
+    DemPatch, FrameReport, NavConfig, NavError, NavWorkspace, Navigator, Prior, SlopeImage,
+};
 
 /// Largest frame side the host-budget workspace holds, pixels.
 pub const MAX_FRAME_SIDE: usize = 512;
@@ -76,6 +82,45 @@ pub fn new_workspace(budget: Budget) -> Workspace {
     match budget {
         Budget::Flight => Workspace::Flight(Box::new(nav_core::flight::Workspace::new())),
         Budget::Host => Workspace::Host(Box::new(HostWorkspace::new())),
+    }
+}
+
+/// A keyframe buffer large enough for either budget's frames and keypoints (its capacity only
+/// bounds the blob; the keyframe itself is what the frame and budget make of it).
+pub type GroundKeyframe =
+    Keyframe<{ keyframe_bytes(MAX_FRAME_SIDE * MAX_FRAME_SIDE, HOST_KEYPOINTS) }>;
+
+/// Capture `heights` (a `w × h` DEM frame of `pixel_m` metres) as the keyframe, with `ws` as
+/// scratch: [`nav_core::odometry::Keyframe::capture`].
+pub fn capture_keyframe(
+    ws: &mut Workspace,
+    key: &mut GroundKeyframe,
+    frame: (&[f32], usize, usize, f64),
+    pose: &KeyframePose,
+    surf: &SurfConfig,
+) -> Result<(), OdometryError> {
+    let (z, w, h, px) = frame;
+    let dem = DemPatch::new_checked(z, w, h, px as f32).map_err(OdometryError::Frame)?;
+    match ws {
+        Workspace::Flight(ws) => key.capture(ws.as_mut(), &dem, pose, surf),
+        Workspace::Host(ws) => key.capture(ws.as_mut(), &dem, pose, surf),
+    }
+}
+
+/// Locate a DEM frame on the keyframe with the navigator configuration `cfg`:
+/// [`nav_core::odometry::locate_on_keyframe`].
+pub fn run_odometry(
+    key: &GroundKeyframe,
+    cfg: &NavConfig,
+    ws: &mut Workspace,
+    frame: (&[f32], usize, usize, f64),
+    prior: &Prior,
+) -> Result<OdometryReport, OdometryError> {
+    let (z, w, h, px) = frame;
+    let dem = DemPatch::new_checked(z, w, h, px as f32).map_err(OdometryError::Frame)?;
+    match ws {
+        Workspace::Flight(ws) => locate_on_keyframe(key, cfg, ws.as_mut(), &dem, prior),
+        Workspace::Host(ws) => locate_on_keyframe(key, cfg, ws.as_mut(), &dem, prior),
     }
 }
 

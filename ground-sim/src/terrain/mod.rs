@@ -17,6 +17,7 @@
 //! in a fixed order, so the DEM is bit-identical for a seed whatever the thread count.
 
 pub mod crater;
+pub mod landing;
 pub mod roughness;
 pub mod sfd;
 

@@ -22,7 +22,7 @@ use super::sfd::std_normal;
 pub const MAX_FFT_SIDE: usize = 4096;
 
 /// Roughness parameters.
-#[derive(Debug, Clone, Copy, serde::Serialize)]
+#[derive(Debug, Clone, Copy, serde::Serialize, serde::Deserialize)]
 pub struct Roughness {
     /// Hurst exponent H (0 < H < 1); lunar highlands ≈ 0.9–0.95 at metre-to-km baselines.
     pub hurst: f64,
