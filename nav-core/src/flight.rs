@@ -31,3 +31,10 @@ pub const KEYFRAME_BYTES: usize = crate::odometry::keyframe_bytes(MAX_FRAME_PX, 
 
 /// The keyframe of the flight configuration (≈ 25 KB; a `static` on the target).
 pub type Keyframe = crate::odometry::Keyframe<KEYFRAME_BYTES>;
+
+/// Sites of the flight hazard map: a 200 px frame at 0.4 m pixels and 1 m site spacing needs
+/// about 64² (a site every 3 pixels); 100² leaves room down to 0.5 m site spacing.
+pub const MAX_HAZARD_SITES: usize = 100 * 100;
+
+/// The hazard map of the flight configuration (20 KB).
+pub type HazardMap = crate::hazard::HazardMap<MAX_HAZARD_SITES>;

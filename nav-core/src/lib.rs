@@ -27,6 +27,8 @@
 //! 12. [`odometry`]: below the tile's reach, frames located on a keyframe (an earlier frame of
 //!     the flyer's own, turned into a tile in RAM) with the same navigator; the displacement
 //!     goes to the filter as a relative measurement against its cloned keyframe position.
+//! 13. [`hazard`]: near the ground, a hazard map of a frame (plane tilt and relief over the
+//!     lander's footprint, clearance to the nearest hazard) and the safe site nearest the target.
 //!
 //! ## Rules this crate keeps
 //!
@@ -65,6 +67,7 @@ pub mod detector;
 pub mod filter;
 pub mod flight;
 pub mod frame;
+pub mod hazard;
 pub mod integral;
 pub mod matching;
 pub mod msac;

@@ -38,3 +38,24 @@ fn navigator_workspace_for_a_256_frame() {
     );
     assert!(ws <= 512 * 1024, "{ws} B exceeds 512 KiB");
 }
+
+#[test]
+fn the_final_phase_fits_beside_the_flight_workspace() {
+    use nav_core::flight::{HazardMap, Keyframe, MAX_FRAME_PX, Workspace};
+    // What the firmware holds for a frame near the ground: the heights it receives, the
+    // navigator's workspace, the keyframe the frame is located on and the hazard map.
+    let heights = 4 * MAX_FRAME_PX;
+    let ws = Workspace::footprint_bytes();
+    let key = Keyframe::footprint_bytes();
+    let hazard = HazardMap::footprint_bytes();
+    let total = heights + ws + key + hazard;
+    println!("frame heights    {heights:>7} B");
+    println!("flight workspace {ws:>7} B");
+    println!("keyframe         {key:>7} B");
+    println!("hazard map       {hazard:>7} B");
+    println!(
+        "total            {total:>7} B = {:.1} KiB",
+        total as f64 / 1024.0
+    );
+    assert!(total <= 512 * 1024, "{total} B exceeds 512 KiB");
+}

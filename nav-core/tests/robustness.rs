@@ -80,6 +80,62 @@ proptest! {
         // CAP_W), are refused; everything else must extract.
         prop_assert!(r.is_ok() || w > CAP_W || w * h > CAP_PX, "{w}×{h}: {r:?}");
     }
+
+    #[test]
+    fn arbitrary_hazard_frames_and_targets_never_panic(
+        (w, h, hs) in (1usize..80, 1usize..80).prop_flat_map(|(w, h)| {
+            (Just(w), Just(h), proptest::collection::vec(height_strategy(), w * h))
+        }),
+        pixel_m in prop_oneof![Just(f32::NAN), 0.01f32..3.0],
+        footprint_m in prop_oneof![Just(0.0f32), Just(f32::INFINITY), 0.1f32..10.0],
+        target in proptest::array::uniform2(prop_oneof![Just(f32::NAN), -1e6f32..1e6]),
+    ) {
+        use nav_core::hazard::{HazardConfig, HazardMap};
+        let Ok(dem) = DemPatch::new_checked(&hs, w, h, pixel_m) else { return Ok(()) };
+        let cfg = HazardConfig { footprint_m, ..HazardConfig::default() };
+        let mut map = Box::new(HazardMap::<400>::new());
+        if let Ok(s) = map.build(&dem, &cfg) {
+            prop_assert_eq!(s.safe + s.too_steep + s.too_rough + s.no_data, s.sites);
+            let (c, r) = map.size();
+            prop_assert!(c * r <= 400);
+        }
+        if let Some(site) = map.choose(target, &cfg) {
+            prop_assert!(site.clearance_m > 0.0 && site.from_target_m <= cfg.max_reach_m);
+        }
+        let _ = map.nearest_site(target);
+    }
+
+    #[test]
+    fn arbitrary_keyframes_and_offsets_never_panic(
+        (w, h, hs) in (1usize..60, 1usize..60).prop_flat_map(|(w, h)| {
+            (Just(w), Just(h), proptest::collection::vec(height_strategy(), w * h))
+        }),
+        pixel_m in prop_oneof![Just(f32::NAN), 0.01f32..20.0],
+        heading in prop_oneof![Just(f64::NAN), -10.0f64..10.0],
+        offset in proptest::array::uniform2(prop_oneof![Just(f64::INFINITY), -1e4f64..1e4]),
+    ) {
+        use nav_core::odometry::{Keyframe, KeyframePose, keyframe_bytes, locate_on_keyframe};
+        use nav_core::{NavConfig, NavWorkspace};
+        let Ok(dem) = DemPatch::new_checked(&hs, w, h, pixel_m) else { return Ok(()) };
+        let mut ws = Box::new(NavWorkspace::<CAP_PX, CAP_W, 16, 32>::new());
+        let mut key = Box::new(Keyframe::<{ keyframe_bytes(CAP_PX, 16) }>::new());
+        let pose = KeyframePose {
+            heading_rad: heading,
+            heading_sigma_rad: 1e-3,
+            pixel_m: pixel_m as f64,
+            pixel_rel_sigma: 1e-3,
+        };
+        if key.capture(ws.as_mut(), &dem, &pose, &SurfConfig::default()).is_ok() {
+            if let Ok(prior) = key.prior(offset, [[4.0, 0.0], [0.0, 4.0]], heading, 0.01, pixel_m as f64, 1e-3)
+                && let Ok(r) = locate_on_keyframe(key.as_ref(), &NavConfig::default(), ws.as_mut(), &dem, &prior)
+                && let Some(o) = r.offset
+            {
+                prop_assert!(o.east_m.is_finite() && o.north_m.is_finite());
+            }
+        } else {
+            prop_assert!(key.tile().is_err());
+        }
+    }
 }
 
 #[test]

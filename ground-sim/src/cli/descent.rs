@@ -8,7 +8,9 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use anyhow::{Context, anyhow, bail};
 use ground_sim::dem::read_geotiff;
 use ground_sim::evaluation::campaign::percentile;
-use ground_sim::evaluation::descent::{DescentConfig, DescentRecord, RunResult, fly};
+use ground_sim::evaluation::descent::{
+    DescentConfig, DescentRecord, HazardPicture, RunResult, fly,
+};
 use ground_sim::evaluation::shard::{
     CampaignInputs, SHARD_FORMAT, SHARD_VERSION, Shard, ShardFile,
 };
@@ -60,6 +62,9 @@ pub struct Args {
     /// by rocks of any size).
     #[arg(long, default_value_t = ground_sim::terrain::landing::DEFAULT_ROCK_K)]
     pub rock_k: f64,
+    /// Land wherever guidance points: no hazard map of the final frames, no safe-site choice.
+    #[arg(long)]
+    pub no_hazard_avoidance: bool,
     /// No keyframe odometry below the TRN floor (2 km): the final phase flies on the IMU and
     /// whatever other aiding is on, as before odometry existed.
     #[arg(long)]
@@ -110,7 +115,8 @@ pub struct DescentSummary {
     pub seed: u64,
     /// The navigator budget the frames were flown with (`flight` is what flies).
     pub budget: String,
-    /// Median landing error, m.
+    /// Median landing error, m: distance from the touchdown to the spot aimed at (the target, or
+    /// the safe site chosen near it), truth.
     pub landing_err_p50_m: f64,
     /// 95th percentile landing error, m.
     pub landing_err_p95_m: f64,
@@ -143,6 +149,15 @@ pub struct DescentSummary {
     pub safe_landing_frac: f64,
     /// Mean over runs of the safe fraction of the ground within 10 m of the target (truth).
     pub target_area_safe_frac: f64,
+    /// Median and 95th percentile distance from the target to the spot finally aimed at (the
+    /// chosen safe site), m.
+    pub site_from_target_p50_m: f64,
+    /// See `site_from_target_p50_m`.
+    pub site_from_target_p95_m: f64,
+    /// Hazard maps made (all runs).
+    pub hazard_maps: usize,
+    /// Runs whose aim moved to a safe site.
+    pub runs_retargeted: usize,
     /// The landing zones' settings (`null`: none).
     pub landing_zone: Option<LandingZoneConfig>,
     /// Median height above terrain of each run's last accepted fix or offset, m.
@@ -190,6 +205,7 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
             d.star_tracker_sigma_rad
         },
         odometry: !a.no_odometry,
+        hazard_avoidance: !a.no_hazard_avoidance,
         ..d
     };
     // Release points and targets: inside the DEM, a cruise frame's reach from the edges.
@@ -331,6 +347,15 @@ pub fn report(
         per_run.push(r.result);
     }
     let mut land: Vec<f64> = per_run.iter().map(|r| r.landing_err_m).collect();
+    let site_pct = |p: f64| {
+        percentile(
+            &mut per_run
+                .iter()
+                .map(|r| r.site_from_target_m)
+                .collect::<Vec<_>>(),
+            p,
+        )
+    };
     let summary = DescentSummary {
         runs: per_run.len(),
         seed: spec.seed,
@@ -382,6 +407,10 @@ pub fn report(
                 .filter(|r| r.target_area_safe_frac.is_finite())
                 .count() as f64,
         landing_zone: spec.landing_zone,
+        site_from_target_p50_m: site_pct(0.5),
+        site_from_target_p95_m: site_pct(0.95),
+        hazard_maps: per_run.iter().map(|r| r.hazard_maps).sum(),
+        runs_retargeted: per_run.iter().filter(|r| r.site_changes > 0).count(),
         last_aid_agl_p50_m: percentile(
             &mut per_run.iter().map(|r| r.last_aid_agl_m).collect::<Vec<_>>(),
             0.5,
@@ -425,6 +454,16 @@ pub fn report(
             summary.keyframes,
             summary.offset_nees_mean,
             100.0 * summary.offsets_in_band_frac
+        );
+    }
+    if summary.config.hazard_avoidance {
+        println!(
+            "hazards      {} maps; {} of {} runs moved their aim, by p50 {:.1} m, p95 {:.1} m",
+            summary.hazard_maps,
+            summary.runs_retargeted,
+            summary.runs,
+            summary.site_from_target_p50_m,
+            summary.site_from_target_p95_m
         );
     }
     if summary.touchdowns_judged > 0 {
@@ -550,5 +589,84 @@ fn write_pictures(r: &RunResult, dir: &std::path::Path) -> anyhow::Result<()> {
         .save(&p2)
         .with_context(|| format!("writing {}", p2.display()))?;
     println!("pictures     {} {}", p1.display(), p2.display());
+    if let Some(hz) = &r.hazard_picture {
+        let p3 = dir.join("descent-hazard.png");
+        hazard_picture(hz, &p3)?;
+        println!("             {}", p3.display());
+    }
+    Ok(())
+}
+
+/// The pictured run's hazard map: the frame's hillshade, unsafe sites tinted red, the original
+/// target (blue cross) and the chosen site (green ring), frame axes, 3 screen pixels per frame
+/// pixel.
+fn hazard_picture(hz: &HazardPicture, path: &Path) -> anyhow::Result<()> {
+    use ground_sim::dem::{Dem, GeoRef};
+    use ground_sim::pictures::render::{Sun, draw_text, hillshade};
+    const Z: u32 = 3;
+    let dem = Dem::new(
+        hz.width,
+        hz.height,
+        hz.heights_m.clone(),
+        GeoRef::local(0.0, 0.0, hz.pixel_m, "hazard frame"),
+    )?;
+    let shade = hillshade(&dem, Sun::default())?;
+    let (w, h) = (hz.width as u32 * Z, hz.height as u32 * Z + 20);
+    let mut img = image::RgbImage::from_pixel(w, h, image::Rgb([255, 255, 255]));
+    let (cols, _) = hz.lattice;
+    let half = hz.step_px / 2.0;
+    for y in 0..hz.height {
+        for x in 0..hz.width {
+            let g = shade[y * hz.width + x];
+            let g = if g.is_finite() { (g * 255.0) as u8 } else { 0 };
+            // The lattice site whose cell holds this pixel.
+            let i = ((x as f32 - hz.site_px[0] + half) / hz.step_px).floor();
+            let j = ((y as f32 - hz.site_px[1] + half) / hz.step_px).floor();
+            let unsafe_site = i >= 0.0
+                && j >= 0.0
+                && hz
+                    .safe
+                    .get(j as usize * cols + i as usize)
+                    .is_some_and(|s| !*s)
+                && (i as usize) < cols;
+            let rgb = if unsafe_site {
+                [g.saturating_add(90), g / 2, g / 2]
+            } else {
+                [g, g, g]
+            };
+            for dy in 0..Z {
+                for dx in 0..Z {
+                    img.put_pixel(x as u32 * Z + dx, y as u32 * Z + dy + 20, image::Rgb(rgb));
+                }
+            }
+        }
+    }
+    let mut mark = |c: [f32; 2], rgb: [u8; 3], ring: bool| {
+        let (cx, cy) = (c[0] * Z as f32, c[1] * Z as f32 + 20.0);
+        for t in 0..360 {
+            let a = (t as f32).to_radians();
+            for r in if ring { 9..12 } else { 0..10 } {
+                // A ring, or a cross of the two diagonals.
+                if !ring && t % 90 != 45 {
+                    continue;
+                }
+                let (x, y) = (cx + r as f32 * a.cos(), cy + r as f32 * a.sin());
+                if x >= 0.0 && y >= 20.0 && (x as u32) < w && (y as u32) < h {
+                    img.put_pixel(x as u32, y as u32, image::Rgb(rgb));
+                }
+            }
+        }
+    };
+    mark(hz.target_px, [40, 90, 230], false);
+    mark(hz.aim_px, [30, 190, 60], true);
+    draw_text(
+        &mut img,
+        4,
+        4,
+        &format!("hazards, {:.2} m px: x target, o site", hz.pixel_m),
+        [0, 0, 0],
+    );
+    img.save(path)
+        .with_context(|| format!("writing {}", path.display()))?;
     Ok(())
 }

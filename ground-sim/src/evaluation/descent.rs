@@ -10,6 +10,7 @@
 use nav_core::filter::{
     FilterConfig, FixMeasurement, InitialState, NavFilter, OffsetMeasurement, UpdateOutcome,
 };
+use nav_core::hazard::HazardConfig;
 use nav_core::odometry::KeyframePose;
 use nav_core::{Navigator, Prior};
 use rand::{RngExt, SeedableRng};
@@ -21,6 +22,56 @@ use crate::flyer::onboard::{
     FrameInput, GroundKeyframe, Workspace, capture_keyframe, run_frame, run_odometry,
 };
 use crate::terrain::landing::{SafetyThresholds, site_safety};
+
+/// The hazard map of the flight budget's capacity (the ground flies it too).
+pub type GroundHazardMap = nav_core::flight::HazardMap;
+
+/// A hazard map as pictured: the frame, the safe flags of its site lattice, the aim and target.
+#[derive(Debug, Clone)]
+pub struct HazardPicture {
+    /// Frame heights, m, row-major.
+    pub heights_m: Vec<f32>,
+    /// Frame width, pixels.
+    pub width: usize,
+    /// Frame height, pixels.
+    pub height: usize,
+    /// Safe flag per lattice site, row-major.
+    pub safe: Vec<bool>,
+    /// Lattice size (columns, rows).
+    pub lattice: (usize, usize),
+    /// Frame pixel of site (0, 0).
+    pub site_px: [f32; 2],
+    /// Frame pixels between sites.
+    pub step_px: f32,
+    /// The aim after this map, frame pixels.
+    pub aim_px: [f32; 2],
+    /// The original target, frame pixels.
+    pub target_px: [f32; 2],
+    /// Frame pixel, m.
+    pub pixel_m: f64,
+}
+
+/// Frame pixel of an east/north offset `d` (m) from the centre of a `w × h` frame whose +x is
+/// `heading` clockwise from east.
+pub fn en_to_frame_px(d: [f64; 2], heading: f64, pixel_m: f64, w: usize, h: usize) -> [f32; 2] {
+    let (s, c) = heading.sin_cos();
+    // Inverse of FramePose::frame_to_geo's rotation (its matrix is its own inverse).
+    let u = c * d[0] - s * d[1];
+    let v = -s * d[0] - c * d[1];
+    [
+        ((w as f64 - 1.0) / 2.0 + u / pixel_m) as f32,
+        ((h as f64 - 1.0) / 2.0 + v / pixel_m) as f32,
+    ]
+}
+
+/// East/north offset (m) from the frame centre of frame pixel `q` (inverse of
+/// [`en_to_frame_px`]).
+pub fn frame_px_to_en(q: [f32; 2], heading: f64, pixel_m: f64, w: usize, h: usize) -> [f64; 2] {
+    let u = (q[0] as f64 - (w as f64 - 1.0) / 2.0) * pixel_m;
+    let v = (q[1] as f64 - (h as f64 - 1.0) / 2.0) * pixel_m;
+    let (s, c) = heading.sin_cos();
+    [u * c - v * s, -u * s - v * c]
+}
 
 /// Radius around the target over which [`RunResult::target_area_safe_frac`] is taken, m: about
 /// the landing error a flyer without hazard avoidance makes (p95 of a few metres) plus the
@@ -89,6 +140,20 @@ pub struct DescentConfig {
     /// Consecutive odometry frames without a fix after which a new keyframe is captured.
     #[serde(default)]
     pub odometry_max_misses: usize,
+    /// Map hazards in the final frames and fly to the safe site nearest the target
+    /// ([`nav_core::hazard`]).
+    #[serde(default)]
+    pub hazard_avoidance: bool,
+    /// Hazard maps are made from frames with pixels this fine or finer, m.
+    #[serde(default)]
+    pub hazard_max_pixel_m: f64,
+    /// No new hazard map below this height above terrain, m (the aim must stay steady for the
+    /// last metres).
+    #[serde(default)]
+    pub hazard_min_agl_m: f64,
+    /// The lander's tolerances and the site choice's limits.
+    #[serde(skip)]
+    pub hazard: HazardConfig,
     /// Shortest hop, m.
     pub hop_min_m: f64,
     /// Longest hop, m.
@@ -129,6 +194,11 @@ impl Default for DescentConfig {
             // 30 m: frame pixels of 8 cm, finer than any landing-zone DEM the ground makes.
             min_frame_agl_m: 30.0,
             odometry_max_misses: 3,
+            hazard_avoidance: true,
+            // 0.4 m pixels (152 m up): ten pixels across the 4 m footprint, range noise 4 cm.
+            hazard_max_pixel_m: 0.4,
+            hazard_min_agl_m: 60.0,
+            hazard: HazardConfig::default(),
             hop_min_m: 2000.0,
             hop_max_m: 15000.0,
             release_sigma_m: 100.0,
@@ -181,7 +251,8 @@ pub struct RunResult {
     /// Flight time, s.
     #[serde(deserialize_with = "f64_or_nan")]
     pub flight_s: f64,
-    /// Horizontal distance from the landing point to the target, m.
+    /// Horizontal distance from the landing point to the spot aimed at (the target, or the safe
+    /// site chosen near it), m.
     #[serde(deserialize_with = "f64_or_nan")]
     pub landing_err_m: f64,
     /// Horizontal navigation error at touchdown, m.
@@ -239,6 +310,22 @@ pub struct RunResult {
     /// the chance of a safe touchdown for a lander that does not look.
     #[serde(default, deserialize_with = "f64_or_nan")]
     pub target_area_safe_frac: f64,
+    /// Distance from the target to the spot finally aimed at (the chosen safe site; 0 without
+    /// a choice), m, truth.
+    #[serde(default, deserialize_with = "f64_or_nan")]
+    pub site_from_target_m: f64,
+    /// Hazard maps made.
+    #[serde(default)]
+    pub hazard_maps: usize,
+    /// Times the aim moved to a new safe site.
+    #[serde(default)]
+    pub site_changes: usize,
+    /// Maps on which the aim was unsafe and no safe site was within reach.
+    #[serde(default)]
+    pub hazard_no_site: usize,
+    /// The last hazard map (pictured run only).
+    #[serde(skip)]
+    pub hazard_picture: Option<HazardPicture>,
     /// Height above terrain of the last accepted measurement (fix or offset), m.
     #[serde(default, deserialize_with = "f64_or_nan")]
     pub last_aid_agl_m: f64,
@@ -403,6 +490,11 @@ pub fn fly(
         offset_nees_sum: 0.0,
         offsets_in_band: 0,
         last_aid_agl_m: f64::NAN,
+        site_from_target_m: f64::NAN,
+        hazard_maps: 0,
+        site_changes: 0,
+        hazard_no_site: 0,
+        hazard_picture: None,
         touchdown_safe: None,
         touchdown_slope_deg: f64::NAN,
         touchdown_relief_m: f64::NAN,
@@ -417,6 +509,16 @@ pub fn fly(
     let max_steps = (1800.0 * cfg.imu_rate_hz) as usize;
     let mut landed = false;
     let mut key = Box::new(GroundKeyframe::new());
+    let mut hazards = Box::new(GroundHazardMap::new());
+    // Where guidance flies to (estimate space) and where that spot truly is.
+    let (mut aim, mut aim_truth) = (target, target);
+    let mut last_hazard = None;
+    // The pictured run keeps its last hazard map.
+    let keep_history = run == 0;
+    // One decision: the first map that finds a site fixes the aim. Later, finer frames would
+    // only re-read the same ground with their own noise (measured: re-deciding on every frame
+    // moved the aim 7 times in 8 maps and landed no safer).
+    let mut site_chosen = false;
     let mut final_nees_sum = 0.0;
     // The truth position of the keyframe, to score offsets (never seen by the flyer).
     let mut key_truth = [0.0f64; 2];
@@ -430,10 +532,13 @@ pub fn fly(
         // Guidance on the estimate.
         let pe = filt.position_m();
         let ve = filt.velocity_mps();
-        let (dx, dy) = (target[0] - pe[0], target[1] - pe[1]);
+        let (dx, dy) = (aim[0] - pe[0], aim[1] - pe[1]);
         let dist = dx.hypot(dy);
         let agl_est = pe[2] - ground(pe[0], pe[1]).max(f64::MIN);
-        let speed = cfg.cruise_speed_mps.min(0.08 * dist);
+        // Cruise closes in gently; over the target (the descent phase) a firmer gain lets a
+        // divert to a safe site settle within seconds, not the whole descent.
+        let gain = if dist > 60.0 { 0.08 } else { 0.25 };
+        let speed = cfg.cruise_speed_mps.min(gain * dist);
         let (vdx, vdy) = if dist > 1e-6 {
             (speed * dx / dist, speed * dy / dist)
         } else {
@@ -574,7 +679,7 @@ pub fn fly(
                     }
                 }
             }
-        } else if cfg.odometry && agl >= cfg.min_frame_agl_m {
+        } else if (cfg.odometry || cfg.hazard_avoidance) && agl >= cfg.min_frame_agl_m {
             let pixel_m = agl * cfg.ifov_rad;
             let pose = FramePose {
                 x_m: p[0],
@@ -585,7 +690,9 @@ pub fn fly(
             if let Ok(frame) = synth_frame_on(terrain, &pose, &cfg.sensor, rng.random::<u64>()) {
                 let input = (&frame.heights_m[..], frame.width, frame.height, pixel_m);
                 let yaw_sigma = filt.yaw_sigma_rad();
-                if key.needs_refresh(pixel_m) || odo_misses >= cfg.odometry_max_misses {
+                if !cfg.odometry {
+                    // Frames for the hazard map only.
+                } else if key.needs_refresh(pixel_m) || odo_misses >= cfg.odometry_max_misses {
                     let kp = KeyframePose {
                         heading_rad: -filt.yaw_rad(),
                         heading_sigma_rad: yaw_sigma,
@@ -654,6 +761,87 @@ pub fn fly(
                         }
                     }
                 }
+                if cfg.hazard_avoidance
+                    && !site_chosen
+                    && pixel_m <= cfg.hazard_max_pixel_m
+                    && agl >= cfg.hazard_min_agl_m
+                {
+                    let dem = nav_core::DemPatch::new_checked(
+                        &frame.heights_m,
+                        frame.width,
+                        frame.height,
+                        pixel_m as f32,
+                    )
+                    .map_err(|e| anyhow::anyhow!("hazard frame: {e}"))?;
+                    if hazards.build(&dem, &cfg.hazard).is_ok() {
+                        out.hazard_maps += 1;
+                        let pe = filt.position_m();
+                        let h_est = -filt.yaw_rad();
+                        let (w, hh) = (frame.width, frame.height);
+                        // Keep the aim while it stays safe with its clearance; else choose anew
+                        // around the original target.
+                        let aim_px =
+                            en_to_frame_px([aim[0] - pe[0], aim[1] - pe[1]], h_est, pixel_m, w, hh);
+                        let (i, j) = hazards.nearest_site(aim_px);
+                        let clear = hazards.clearance_m(i, j);
+                        if clear < cfg.hazard.clearance_m {
+                            let target_px = en_to_frame_px(
+                                [target[0] - pe[0], target[1] - pe[1]],
+                                h_est,
+                                pixel_m,
+                                w,
+                                hh,
+                            );
+                            // An aim that is safe but tight moves only to a roomier site; an
+                            // unsafe one takes the best there is.
+                            let pick = if clear > 0.0 {
+                                hazards.nearest_with(target_px, cfg.hazard.clearance_m, &cfg.hazard)
+                            } else {
+                                hazards.choose(target_px, &cfg.hazard)
+                            };
+                            if let Some(site) = pick {
+                                let d = frame_px_to_en(site.frame_px, h_est, pixel_m, w, hh);
+                                aim = [pe[0] + d[0], pe[1] + d[1]];
+                                // Where that spot truly is: the frame is centred on the truth.
+                                let dt = frame_px_to_en(site.frame_px, -yaw, pixel_m, w, hh);
+                                aim_truth = [p[0] + dt[0], p[1] + dt[1]];
+                                out.site_changes += 1;
+                                site_chosen = true;
+                            } else {
+                                out.hazard_no_site += 1;
+                            }
+                        }
+                        if keep_history {
+                            last_hazard = Some(HazardPicture {
+                                heights_m: frame.heights_m.clone(),
+                                width: w,
+                                height: hh,
+                                safe: (0..hazards.size().1)
+                                    .flat_map(|j| (0..hazards.size().0).map(move |i| (i, j)))
+                                    .map(|(i, j)| hazards.is_safe(i, j))
+                                    .collect(),
+                                lattice: hazards.size(),
+                                site_px: hazards.site_px(0, 0),
+                                step_px: hazards.site_px(1, 1)[0] - hazards.site_px(0, 0)[0],
+                                aim_px: en_to_frame_px(
+                                    [aim[0] - pe[0], aim[1] - pe[1]],
+                                    h_est,
+                                    pixel_m,
+                                    w,
+                                    hh,
+                                ),
+                                target_px: en_to_frame_px(
+                                    [target[0] - pe[0], target[1] - pe[1]],
+                                    h_est,
+                                    pixel_m,
+                                    w,
+                                    hh,
+                                ),
+                                pixel_m,
+                            });
+                        }
+                    }
+                }
             }
         }
         let pe = filt.position_m();
@@ -680,7 +868,9 @@ pub fn fly(
         anyhow::bail!("run {run}: no touchdown within 30 minutes");
     }
     let pe = filt.position_m();
-    out.landing_err_m = (p[0] - target[0]).hypot(p[1] - target[1]);
+    out.landing_err_m = (p[0] - aim_truth[0]).hypot(p[1] - aim_truth[1]);
+    out.site_from_target_m = (aim_truth[0] - target[0]).hypot(aim_truth[1] - target[1]);
+    out.hazard_picture = last_hazard;
     if let Some(zone) = terrain.zone {
         let t = SafetyThresholds::default();
         if let Some(s) = site_safety(zone, p[0], p[1], &t) {

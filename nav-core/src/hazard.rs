@@ -1,0 +1,491 @@
+//! Hazard map and safe-site choice from one of the flyer's own DEM frames near the ground.
+//!
+//! A **site** is a lattice point of the frame (every `step` frame pixels, about
+//! [`HazardConfig::site_step_m`] apart). Each site is judged over the lander's footprint: the
+//! frame cells whose centres lie within half [`HazardConfig::footprint_m`] of it get a
+//! least-squares plane; the site is **safe** when that plane's tilt is at most
+//! [`HazardConfig::max_slope_deg`] and no cell lies farther than [`HazardConfig::max_relief_m`]
+//! above or below it (a rock the belly or a leg would strike, a hole a leg would drop into). A
+//! footprint touching no-data cells is unsafe: what the flyer cannot see, it does not land on.
+//! This is the same test the ground scores touchdowns with (`ground-sim`'s `site_safety`), on
+//! the flyer's noisy frame instead of the truth.
+//!
+//! The **clearance** of a safe site is its distance to the nearest unsafe site or to the edge of
+//! the mapped lattice (beyond it nothing is known): a two-pass 3-4 chamfer distance transform,
+//! integer and exact on every target, within 8 % of the Euclidean distance. The chosen site is
+//! the safe site within [`HazardConfig::max_reach_m`] of the target nearest to it among those
+//! with [`HazardConfig::preferred_clearance_m`] of clearance, else among those with
+//! [`HazardConfig::clearance_m`], else the one with the most clearance (ties: nearer, then
+//! lattice order), so the lander's own dispersion around the site stays on safe ground.
+//!
+//! Units and axes: frame pixels (x = column, y = row, centres at integers) and metres on the
+//! ground; the caller turns the site's frame position into east/north with the frame's heading.
+//! Bounds: at most `N` sites (const generic; [`MAX_FOOTPRINT_PX`] footprint side); work per
+//! frame is sites × footprint cells, twice, plus two lattice sweeps. No allocation, no panic.
+
+use crate::frame::DemPatch;
+use core::fmt;
+
+/// Largest footprint side in frame pixels: a finer frame is judged on a 2× coarser grid of its
+/// cells would be the remedy; refused instead, the caller takes the next frame.
+pub const MAX_FOOTPRINT_PX: usize = 33;
+/// Smallest footprint side in frame pixels: fewer cells cannot show a rock inside the footprint.
+pub const MIN_FOOTPRINT_PX: usize = 5;
+/// Chamfer weights (orthogonal, diagonal) of the clearance distance transform, in thirds of a
+/// lattice step.
+const CHAMFER: (u16, u16) = (3, 4);
+/// Clearance of a site that is itself unsafe.
+const BLOCKED: u16 = 0;
+
+/// The lander's tolerances and the choice's limits.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct HazardConfig {
+    /// Diameter of the disc judged around a site, m: the lander's leg span.
+    pub footprint_m: f32,
+    /// Largest tilt of the fitted plane, degrees (judged on the flyer's frame: the lander's
+    /// tolerance less a sensing margin).
+    pub max_slope_deg: f32,
+    /// Largest height of a cell above or below the plane, m.
+    pub max_relief_m: f32,
+    /// Spacing of the site lattice, m (rounded to whole frame pixels, at least one).
+    pub site_step_m: f32,
+    /// Smallest clearance of the chosen site, m: an aim with less is moved.
+    pub clearance_m: f32,
+    /// Clearance sought first, m: the nearest site with this much is taken when there is one
+    /// (a roomy site stays safe from one map to the next as the frames sharpen).
+    pub preferred_clearance_m: f32,
+    /// Farthest the chosen site may be from the target, m (the fuel and time left).
+    pub max_reach_m: f32,
+}
+
+impl Default for HazardConfig {
+    fn default() -> Self {
+        Self {
+            footprint_m: 4.0,
+            // The lander tolerates 10° and 0.3 m; the frame misreads both (a 0.4 m pixel
+            // averages a rock's top away, 4 cm of range noise tilts a 4 m plane by ~1°), so the
+            // map judges with a margin of 2° and 5 cm.
+            max_slope_deg: 8.0,
+            max_relief_m: 0.25,
+            site_step_m: 1.0,
+            // About twice the relative drift between the hazard frame and touchdown.
+            clearance_m: 2.0,
+            preferred_clearance_m: 4.0,
+            max_reach_m: 30.0,
+        }
+    }
+}
+
+/// Why no hazard map was made.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum HazardError {
+    /// A setting is not finite or not positive.
+    BadConfig,
+    /// The frame's pixels are too coarse for the footprint (fewer than [`MIN_FOOTPRINT_PX`]).
+    TooCoarse,
+    /// The frame's pixels are too fine (more than [`MAX_FOOTPRINT_PX`] per footprint).
+    TooFine,
+    /// The frame is smaller than one footprint.
+    TooSmall,
+    /// More sites than the map holds.
+    TooManySites {
+        /// Sites the frame would need.
+        needed: usize,
+        /// Sites the map holds.
+        capacity: usize,
+    },
+}
+
+impl fmt::Display for HazardError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::BadConfig => f.write_str("hazard settings not finite or not positive"),
+            Self::TooCoarse => f.write_str("frame too coarse for the lander's footprint"),
+            Self::TooFine => f.write_str("frame too fine for the footprint window"),
+            Self::TooSmall => f.write_str("frame smaller than one footprint"),
+            Self::TooManySites { needed, capacity } => {
+                write!(f, "{needed} sites needed, the map holds {capacity}")
+            }
+        }
+    }
+}
+impl core::error::Error for HazardError {}
+
+/// What one map found.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct HazardStats {
+    /// Sites judged.
+    pub sites: u32,
+    /// Of those, safe.
+    pub safe: u32,
+    /// Unsafe for their tilt (and possibly their relief too).
+    pub too_steep: u32,
+    /// Unsafe for their relief alone.
+    pub too_rough: u32,
+    /// Unsafe because their footprint touched no data.
+    pub no_data: u32,
+}
+
+/// The chosen site.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct SafeSite {
+    /// Position in frame pixels `[x, y]`.
+    pub frame_px: [f32; 2],
+    /// Clearance, m.
+    pub clearance_m: f32,
+    /// Distance from the target, m.
+    pub from_target_m: f32,
+}
+
+/// A hazard map of at most `N` sites.
+pub struct HazardMap<const N: usize> {
+    /// Clearance per site in thirds of a lattice step; 0 = unsafe.
+    clearance: [u16; N],
+    cols: usize,
+    rows: usize,
+    /// Frame pixels between sites.
+    step_px: usize,
+    /// Frame pixel of site (0, 0) (both axes).
+    first_px: usize,
+    pixel_m: f32,
+}
+
+impl<const N: usize> Default for HazardMap<N> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl<const N: usize> HazardMap<N> {
+    /// An empty map (`const`, so it can be a `static`).
+    pub const fn new() -> Self {
+        Self {
+            clearance: [BLOCKED; N],
+            cols: 0,
+            rows: 0,
+            step_px: 1,
+            first_px: 0,
+            pixel_m: 1.0,
+        }
+    }
+
+    /// Size in bytes.
+    pub const fn footprint_bytes() -> usize {
+        core::mem::size_of::<Self>()
+    }
+
+    /// Lattice size `(columns, rows)` of the last map.
+    pub fn size(&self) -> (usize, usize) {
+        (self.cols, self.rows)
+    }
+
+    /// Frame pixel of lattice site `(i, j)`.
+    pub fn site_px(&self, i: usize, j: usize) -> [f32; 2] {
+        [
+            (self.first_px + i * self.step_px) as f32,
+            (self.first_px + j * self.step_px) as f32,
+        ]
+    }
+
+    /// The lattice site nearest to frame pixel `q` (clamped to the lattice).
+    pub fn nearest_site(&self, q: [f32; 2]) -> (usize, usize) {
+        let idx = |v: f32, n: usize| {
+            let k = libm::roundf((v - self.first_px as f32) / self.step_px as f32);
+            if k.is_finite() && k > 0.0 {
+                (k as usize).min(n.saturating_sub(1))
+            } else {
+                0
+            }
+        };
+        (idx(q[0], self.cols), idx(q[1], self.rows))
+    }
+
+    /// Clearance of site `(i, j)`, m (0: unsafe or outside the lattice).
+    pub fn clearance_m(&self, i: usize, j: usize) -> f32 {
+        if i >= self.cols || j >= self.rows {
+            return 0.0;
+        }
+        let c = self
+            .clearance
+            .get(j * self.cols + i)
+            .copied()
+            .unwrap_or(BLOCKED);
+        c as f32 / CHAMFER.0 as f32 * self.step_px as f32 * self.pixel_m
+    }
+
+    /// Whether site `(i, j)` is safe.
+    pub fn is_safe(&self, i: usize, j: usize) -> bool {
+        self.clearance_m(i, j) > 0.0
+    }
+
+    /// Judge every site of `dem` under `cfg`.
+    pub fn build(
+        &mut self,
+        dem: &DemPatch<'_>,
+        cfg: &HazardConfig,
+    ) -> Result<HazardStats, HazardError> {
+        self.cols = 0;
+        self.rows = 0;
+        let vals = [
+            cfg.footprint_m,
+            cfg.max_slope_deg,
+            cfg.max_relief_m,
+            cfg.site_step_m,
+            cfg.clearance_m,
+            cfg.preferred_clearance_m,
+            cfg.max_reach_m,
+        ];
+        if !vals.iter().all(|v| v.is_finite() && *v > 0.0) {
+            return Err(HazardError::BadConfig);
+        }
+        let px = dem.pixel_m();
+        let side = libm::roundf(cfg.footprint_m / px);
+        if side < MIN_FOOTPRINT_PX as f32 {
+            return Err(HazardError::TooCoarse);
+        }
+        if side > MAX_FOOTPRINT_PX as f32 {
+            return Err(HazardError::TooFine);
+        }
+        let half = (side as usize) / 2;
+        let (w, h) = (dem.width(), dem.height());
+        if w < 2 * half + 1 || h < 2 * half + 1 {
+            return Err(HazardError::TooSmall);
+        }
+        let step = (libm::roundf(cfg.site_step_m / px) as usize).max(1);
+        let cols = (w - 2 * half - 1) / step + 1;
+        let rows = (h - 2 * half - 1) / step + 1;
+        let n = cols * rows;
+        if n > N {
+            return Err(HazardError::TooManySites {
+                needed: n,
+                capacity: N,
+            });
+        }
+        // Disc offsets in pixels: |d| ≤ radius in metres.
+        let r_px = cfg.footprint_m * 0.5 / px;
+        let r2 = r_px * r_px;
+        let h_i = half as isize;
+        let in_disc = |dx: isize, dy: isize| ((dx * dx + dy * dy) as f32) <= r2;
+        let (mut sxx, mut cells) = (0.0f32, 0u32);
+        for dy in -h_i..=h_i {
+            for dx in -h_i..=h_i {
+                if in_disc(dx, dy) {
+                    sxx += (dx * dx) as f32;
+                    cells += 1;
+                }
+            }
+        }
+        // The disc is symmetric: Σx = Σy = Σxy = 0 and Σx² = Σy², so the plane's coefficients
+        // are plain moments.
+        let tan_max = libm::tanf(cfg.max_slope_deg.to_radians());
+        let mut stats = HazardStats {
+            sites: n as u32,
+            safe: 0,
+            too_steep: 0,
+            too_rough: 0,
+            no_data: 0,
+        };
+        // Every footprint cell of the site at (cx, cy): offsets (px) and height (NaN = none).
+        let visit = |cx: usize, cy: usize, f: &mut dyn FnMut(f32, f32, f32)| {
+            for dy in -h_i..=h_i {
+                for dx in -h_i..=h_i {
+                    if in_disc(dx, dy) {
+                        let z = dem
+                            .height_at((cx as isize + dx) as usize, (cy as isize + dy) as usize)
+                            .unwrap_or(f32::NAN);
+                        f(dx as f32, dy as f32, z);
+                    }
+                }
+            }
+        };
+        for j in 0..rows {
+            for i in 0..cols {
+                let (cx, cy) = (half + i * step, half + j * step);
+                let z0 = dem.height_at(cx, cy).unwrap_or(f32::NAN);
+                let (mut s, mut sx, mut sy, mut bad) = (0.0f32, 0.0f32, 0.0f32, !z0.is_finite());
+                visit(cx, cy, &mut |dx, dy, z| {
+                    if !z.is_finite() {
+                        bad = true;
+                    }
+                    let d = z - z0;
+                    s += d;
+                    sx += dx * d;
+                    sy += dy * d;
+                });
+                let safe = if bad || cells == 0 || sxx <= 0.0 {
+                    stats.no_data += 1;
+                    false
+                } else {
+                    let a = s / cells as f32;
+                    let (b, c) = (sx / sxx, sy / sxx);
+                    let steep = libm::hypotf(b, c) / px > tan_max;
+                    let mut relief = 0.0f32;
+                    visit(cx, cy, &mut |dx, dy, z| {
+                        relief = relief.max(libm::fabsf(z - z0 - (a + b * dx + c * dy)));
+                    });
+                    if steep {
+                        stats.too_steep += 1;
+                        false
+                    } else if relief > cfg.max_relief_m {
+                        stats.too_rough += 1;
+                        false
+                    } else {
+                        stats.safe += 1;
+                        true
+                    }
+                };
+                if let Some(c) = self.clearance.get_mut(j * cols + i) {
+                    *c = if safe { u16::MAX } else { BLOCKED };
+                }
+            }
+        }
+        self.cols = cols;
+        self.rows = rows;
+        self.step_px = step;
+        self.first_px = half;
+        self.pixel_m = px;
+        self.distance_transform();
+        Ok(stats)
+    }
+
+    /// Two-pass 3-4 chamfer distance to the nearest unsafe site, the lattice's outside counting
+    /// as unsafe (one step beyond the edge).
+    fn distance_transform(&mut self) {
+        let (cols, rows) = (self.cols, self.rows);
+        let (o, d) = CHAMFER;
+        let get = |c: &[u16; N], i: isize, j: isize| -> u16 {
+            if i < 0 || j < 0 || i >= cols as isize || j >= rows as isize {
+                BLOCKED
+            } else {
+                c.get(j as usize * cols + i as usize)
+                    .copied()
+                    .unwrap_or(BLOCKED)
+            }
+        };
+        for j in 0..rows as isize {
+            for i in 0..cols as isize {
+                let k = j as usize * cols + i as usize;
+                let v = get(&self.clearance, i, j);
+                if v == BLOCKED {
+                    continue;
+                }
+                let best = [
+                    get(&self.clearance, i - 1, j).saturating_add(o),
+                    get(&self.clearance, i, j - 1).saturating_add(o),
+                    get(&self.clearance, i - 1, j - 1).saturating_add(d),
+                    get(&self.clearance, i + 1, j - 1).saturating_add(d),
+                ]
+                .into_iter()
+                .fold(v, u16::min);
+                if let Some(c) = self.clearance.get_mut(k) {
+                    *c = best;
+                }
+            }
+        }
+        for j in (0..rows as isize).rev() {
+            for i in (0..cols as isize).rev() {
+                let k = j as usize * cols + i as usize;
+                let v = get(&self.clearance, i, j);
+                if v == BLOCKED {
+                    continue;
+                }
+                let best = [
+                    get(&self.clearance, i + 1, j).saturating_add(o),
+                    get(&self.clearance, i, j + 1).saturating_add(o),
+                    get(&self.clearance, i + 1, j + 1).saturating_add(d),
+                    get(&self.clearance, i - 1, j + 1).saturating_add(d),
+                ]
+                .into_iter()
+                .fold(v, u16::min);
+                if let Some(c) = self.clearance.get_mut(k) {
+                    *c = best;
+                }
+            }
+        }
+    }
+
+    /// The safe site nearest to `target_px` (frame pixels) with at least
+    /// `cfg.preferred_clearance_m` of clearance, else with at least `cfg.clearance_m`, within
+    /// `cfg.max_reach_m`; failing both, the safe site within reach with the largest clearance (a narrow safe spot beats certain hazard); `None` if no site within
+    /// reach is safe.
+    pub fn choose(&self, target_px: [f32; 2], cfg: &HazardConfig) -> Option<SafeSite> {
+        if !(target_px[0].is_finite() && target_px[1].is_finite()) {
+            return None;
+        }
+        self.nearest_with(target_px, cfg.preferred_clearance_m, cfg)
+            .or_else(|| self.nearest_with(target_px, cfg.clearance_m, cfg))
+            .or_else(|| self.widest_within_reach(target_px, cfg))
+    }
+
+    fn widest_within_reach(&self, target_px: [f32; 2], cfg: &HazardConfig) -> Option<SafeSite> {
+        let mut best: Option<SafeSite> = None;
+        for j in 0..self.rows {
+            for i in 0..self.cols {
+                let clear = self.clearance_m(i, j);
+                if clear <= 0.0 {
+                    continue;
+                }
+                let p = self.site_px(i, j);
+                let dist = libm::hypotf(p[0] - target_px[0], p[1] - target_px[1]) * self.pixel_m;
+                if dist > cfg.max_reach_m {
+                    continue;
+                }
+                let better = best.is_none_or(|b| {
+                    clear > b.clearance_m || (clear == b.clearance_m && dist < b.from_target_m)
+                });
+                if better {
+                    best = Some(SafeSite {
+                        frame_px: p,
+                        clearance_m: clear,
+                        from_target_m: dist,
+                    });
+                }
+            }
+        }
+        best
+    }
+
+    /// The safe site nearest to `target_px` with at least `min_clearance_m` of clearance within
+    /// `cfg.max_reach_m` (no fallback).
+    pub fn nearest_with(
+        &self,
+        target_px: [f32; 2],
+        min_clearance_m: f32,
+        cfg: &HazardConfig,
+    ) -> Option<SafeSite> {
+        let mut best: Option<(f32, f32, SafeSite)> = None;
+        for j in 0..self.rows {
+            for i in 0..self.cols {
+                let clear = self.clearance_m(i, j);
+                if clear <= 0.0 || clear < min_clearance_m {
+                    continue;
+                }
+                let p = self.site_px(i, j);
+                let dist = libm::hypotf(p[0] - target_px[0], p[1] - target_px[1]) * self.pixel_m;
+                if dist > cfg.max_reach_m {
+                    continue;
+                }
+                let better = match &best {
+                    None => true,
+                    Some((bd, bc, _)) => dist < *bd || (dist == *bd && clear > *bc),
+                };
+                if better {
+                    best = Some((
+                        dist,
+                        clear,
+                        SafeSite {
+                            frame_px: p,
+                            clearance_m: clear,
+                            from_target_m: dist,
+                        },
+                    ));
+                }
+            }
+        }
+        best.map(|b| b.2)
+    }
+}

@@ -1,0 +1,147 @@
+//! The hazard map on frames whose answer is known: flat ground, a tilted plane, one rock, a
+//! hole in the data.
+
+use nav_core::DemPatch;
+use nav_core::flight::HazardMap;
+use nav_core::hazard::{HazardConfig, HazardError};
+
+const SIDE: usize = 120;
+const PX: f32 = 0.4;
+
+fn frame(f: impl Fn(f32, f32) -> f32) -> Vec<f32> {
+    (0..SIDE * SIDE)
+        .map(|k| f((k % SIDE) as f32 * PX, (k / SIDE) as f32 * PX))
+        .collect()
+}
+
+#[test]
+fn flat_ground_is_safe_and_the_centre_is_chosen() {
+    let z = frame(|x, y| 100.0 + 0.01 * x - 0.02 * y);
+    let dem = DemPatch::new_checked(&z, SIDE, SIDE, PX).unwrap();
+    let mut map = Box::new(HazardMap::new());
+    let cfg = HazardConfig::default();
+    let s = map.build(&dem, &cfg).unwrap();
+    assert_eq!(s.safe, s.sites);
+    let (cols, rows) = map.size();
+    // Clearance grows from the lattice edge inwards.
+    assert!(map.clearance_m(0, 0) < map.clearance_m(cols / 2, rows / 2));
+    let c = [(SIDE as f32 - 1.0) / 2.0; 2];
+    let site = map.choose(c, &cfg).unwrap();
+    assert!(site.from_target_m < 1.0, "{site:?}");
+}
+
+#[test]
+fn a_plane_steeper_than_the_limit_is_unsafe() {
+    let t = 15f32.to_radians().tan();
+    let z = frame(|x, _| t * x);
+    let dem = DemPatch::new_checked(&z, SIDE, SIDE, PX).unwrap();
+    let mut map = Box::new(HazardMap::new());
+    let cfg = HazardConfig::default();
+    let s = map.build(&dem, &cfg).unwrap();
+    assert_eq!(s.safe, 0);
+    assert_eq!(s.too_steep, s.sites);
+    assert!(map.choose([60.0, 60.0], &cfg).is_none());
+    // 6° is within the map's 8° (the lander's 10° less the sensing margin).
+    let t = 6f32.to_radians().tan();
+    let z = frame(|x, _| t * x);
+    let dem = DemPatch::new_checked(&z, SIDE, SIDE, PX).unwrap();
+    assert_eq!(map.build(&dem, &cfg).unwrap().too_steep, 0);
+}
+
+#[test]
+fn a_rock_at_the_target_moves_the_site_off_it() {
+    // A 0.5 m half-ellipsoid rock, 1.6 m across, centred in the frame.
+    let c = (SIDE as f32 - 1.0) / 2.0 * PX;
+    let z = frame(|x, y| {
+        let r = (x - c).hypot(y - c) / 0.8;
+        if r < 1.0 {
+            0.5 * (1.0 - r * r).sqrt()
+        } else {
+            0.0
+        }
+    });
+    let dem = DemPatch::new_checked(&z, SIDE, SIDE, PX).unwrap();
+    let mut map = Box::new(HazardMap::new());
+    let cfg = HazardConfig::default();
+    let s = map.build(&dem, &cfg).unwrap();
+    assert!(s.too_rough > 0 && s.safe > 0, "{s:?}");
+    let target = [c / PX; 2];
+    let site = map.choose(target, &cfg).unwrap();
+    // The footprints over the rock are unsafe; the chosen site keeps its 2 m clearance from
+    // them, so it lies more than that from the rock, and not much farther.
+    let (cols, rows) = map.size();
+    assert!(!map.is_safe(cols / 2, rows / 2));
+    assert!(
+        site.from_target_m > cfg.clearance_m + 1.0 && site.from_target_m < 7.5,
+        "{site:?}"
+    );
+    assert!(site.clearance_m >= cfg.clearance_m);
+}
+
+#[test]
+fn missing_data_is_unsafe_and_bad_settings_are_refused() {
+    let mut z = frame(|_, _| 0.0);
+    z[60 * SIDE + 60] = f32::NAN;
+    let dem = DemPatch::new_checked(&z, SIDE, SIDE, PX).unwrap();
+    let mut map = Box::new(HazardMap::new());
+    let s = map.build(&dem, &HazardConfig::default()).unwrap();
+    assert!(s.no_data > 0 && s.no_data < s.sites);
+    let bad = HazardConfig {
+        max_relief_m: f32::NAN,
+        ..HazardConfig::default()
+    };
+    assert_eq!(map.build(&dem, &bad), Err(HazardError::BadConfig));
+    let coarse = DemPatch::new_checked(&z, SIDE, SIDE, 2.0).unwrap();
+    assert_eq!(
+        map.build(&coarse, &HazardConfig::default()),
+        Err(HazardError::TooCoarse)
+    );
+    let fine = DemPatch::new_checked(&z, SIDE, SIDE, 0.05).unwrap();
+    assert_eq!(
+        map.build(&fine, &HazardConfig::default()),
+        Err(HazardError::TooFine)
+    );
+    let small = DemPatch::new_checked(&z[..8 * 8], 8, 8, PX).unwrap();
+    assert_eq!(
+        map.build(&small, &HazardConfig::default()),
+        Err(HazardError::TooSmall)
+    );
+    // A failed build leaves no map to choose from.
+    assert!(map.choose([4.0, 4.0], &HazardConfig::default()).is_none());
+}
+
+#[test]
+fn a_tight_gap_is_taken_only_when_nothing_roomier_is_in_reach() {
+    // Rough ground (0.6 m bumps every 2 m) everywhere except a smooth 5 m square right of
+    // the target and a wide smooth field far left.
+    let smooth = |x: f32, y: f32| {
+        let gap = (x - 32.0).abs() < 2.5 && (y - 24.0).abs() < 2.5;
+        let field = x < 12.0;
+        gap || field
+    };
+    let z = frame(|x, y| {
+        if smooth(x, y) {
+            0.0
+        } else {
+            0.3 * ((x * std::f32::consts::PI).sin() + (y * std::f32::consts::PI).sin())
+        }
+    });
+    let dem = DemPatch::new_checked(&z, SIDE, SIDE, PX).unwrap();
+    let mut map = Box::new(HazardMap::new());
+    let cfg = HazardConfig::default();
+    map.build(&dem, &cfg).unwrap();
+    let target = [30.0 / PX, 24.0 / PX];
+    // The field (≥ 4 m clear) is 18+ m away, within the 30 m reach: it wins over the gap.
+    let far = map.choose(target, &cfg).unwrap();
+    assert!(far.frame_px[0] * PX < 12.0, "{far:?}");
+    assert!(far.clearance_m >= cfg.preferred_clearance_m, "{far:?}");
+    // With a 10 m reach only the gap is left, tight as it is.
+    let near = HazardConfig {
+        max_reach_m: 10.0,
+        ..cfg
+    };
+    let gap = map.choose(target, &near).unwrap();
+    assert!((gap.frame_px[0] * PX - 32.0).abs() < 2.5, "{gap:?}");
+    assert!(gap.clearance_m < cfg.clearance_m, "{gap:?}");
+    assert!(map.nearest_with(target, cfg.clearance_m, &near).is_none());
+}
