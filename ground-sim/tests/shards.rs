@@ -201,7 +201,11 @@ fn merged_shards_equal_the_single_run_byte_for_byte() {
         let out = dir.path().join(format!("descent-{n}"));
         local_shards(n, &out, "descent", &descent_args);
         assert_same_bytes(&json, &out.join("descent.json"));
-        for png in ["descent-trajectory.png", "descent-error.png"] {
+        for png in [
+            "descent-trajectory.png",
+            "descent-error.png",
+            "descent-hazard.png",
+        ] {
             assert_same_bytes(&single.join(png), &out.join(png));
         }
     }

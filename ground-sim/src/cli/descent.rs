@@ -342,6 +342,7 @@ pub fn report(
         if let Some(h) = r.history {
             let mut shown = r.result.clone();
             shown.history = h;
+            shown.hazard_picture = r.hazard_picture;
             pictured.get_or_insert(shown);
         }
         per_run.push(r.result);

@@ -27,9 +27,10 @@ use crate::terrain::landing::{SafetyThresholds, site_safety};
 pub type GroundHazardMap = nav_core::flight::HazardMap;
 
 /// A hazard map as pictured: the frame, the safe flags of its site lattice, the aim and target.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct HazardPicture {
-    /// Frame heights, m, row-major.
+    /// Frame heights, m, row-major (NaN = dropout; JSON `null`).
+    #[serde(deserialize_with = "f32s_or_nan")]
     pub heights_m: Vec<f32>,
     /// Frame width, pixels.
     pub width: usize,
@@ -49,6 +50,12 @@ pub struct HazardPicture {
     pub target_px: [f32; 2],
     /// Frame pixel, m.
     pub pixel_m: f64,
+}
+
+/// Heights written by serde_json (NaN as `null`) read back.
+fn f32s_or_nan<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Vec<f32>, D::Error> {
+    let v: Vec<Option<f32>> = Deserialize::deserialize(d)?;
+    Ok(v.into_iter().map(|x| x.unwrap_or(f32::NAN)).collect())
 }
 
 /// Frame pixel of an east/north offset `d` (m) from the centre of a `w × h` frame whose +x is
@@ -391,6 +398,9 @@ pub struct DescentRecord {
     pub totals: HistoryTotals,
     /// The history itself, kept for run 0 only (its pictures).
     pub history: Option<Vec<Sample>>,
+    /// Run 0's last hazard map (its picture), so merged shards draw it too.
+    #[serde(default)]
+    pub hazard_picture: Option<HazardPicture>,
 }
 
 impl DescentRecord {
@@ -398,10 +408,12 @@ impl DescentRecord {
     pub fn new(mut r: RunResult, keep_history: bool) -> Self {
         let totals = HistoryTotals::of(&r.history);
         let history = std::mem::take(&mut r.history);
+        let hazard = r.hazard_picture.take();
         Self {
             result: r,
             totals,
             history: keep_history.then_some(history),
+            hazard_picture: hazard.filter(|_| keep_history),
         }
     }
 }
