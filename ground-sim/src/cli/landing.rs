@@ -13,7 +13,7 @@ use ground_sim::dem::stats::slope_deg;
 use ground_sim::dem::{
     Dem, DemError, GeoRef, GeoTransform, SampleKind, read_geotiff, write_geotiff,
 };
-use ground_sim::pictures::render::{GLYPH, Sun, draw_text, hillshade};
+use ground_sim::pictures::render::{GLYPH, Sun, draw_text, hillshade, scale_bar_length};
 use ground_sim::terrain::landing::{
     DEFAULT_ROCK_K, DEFAULT_TAPER_M, LandingZoneConfig, LandingZoneReport, SafetyMap,
     SafetyThresholds, landing_zone_with_report, safety_map,
@@ -423,13 +423,7 @@ fn picture(
         }
     }
     // Scale bar below the map: a round length near a quarter of its width.
-    let target = f64::from(w) * ppx / 4.0;
-    let mag = 10f64.powf(target.log10().floor());
-    let len_m = [5.0, 2.0, 1.0]
-        .iter()
-        .map(|m| m * mag)
-        .find(|l| *l <= target)
-        .unwrap_or(mag);
+    let len_m = scale_bar_length(f64::from(w) * ppx / 4.0);
     let len_px = (len_m / ppx).round() as u32;
     let y0 = top + h + 6;
     for x in pad..pad + len_px {

@@ -622,7 +622,8 @@ pub fn fly(
             )
             .map_err(|e| anyhow::anyhow!("filter: {e}"))?;
         }
-        if agl >= cfg.min_fix_agl_m {
+        // The sensor looks straight down from the truth position; its pixel grows with height.
+        let frame_pose = |p: [f64; 3], yaw: f64, agl: f64| {
             let pixel_m = agl * cfg.ifov_rad;
             let pose = FramePose {
                 x_m: p[0],
@@ -630,6 +631,10 @@ pub fn fly(
                 heading_rad: -yaw,
                 pixel_m,
             };
+            (pixel_m, pose)
+        };
+        if agl >= cfg.min_fix_agl_m {
+            let (pixel_m, pose) = frame_pose(p, yaw, agl);
             if let Ok(frame) = synth_frame_on(terrain, &pose, &cfg.sensor, rng.random::<u64>()) {
                 let pe = filt.position_m();
                 let pc = filt.horizontal_cov_m2();
@@ -692,13 +697,7 @@ pub fn fly(
                 }
             }
         } else if (cfg.odometry || cfg.hazard_avoidance) && agl >= cfg.min_frame_agl_m {
-            let pixel_m = agl * cfg.ifov_rad;
-            let pose = FramePose {
-                x_m: p[0],
-                y_m: p[1],
-                heading_rad: -yaw,
-                pixel_m,
-            };
+            let (pixel_m, pose) = frame_pose(p, yaw, agl);
             if let Ok(frame) = synth_frame_on(terrain, &pose, &cfg.sensor, rng.random::<u64>()) {
                 let input = (&frame.heights_m[..], frame.width, frame.height, pixel_m);
                 let yaw_sigma = filt.yaw_sigma_rad();

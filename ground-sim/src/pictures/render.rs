@@ -247,16 +247,20 @@ fn compose(
     img
 }
 
-/// A white scale bar with a black outline and its length, bottom-left of the map.
-fn scale_bar(img: &mut RgbImage, panel: &Panel, pixel_m: f64) {
-    let map_w_m = f64::from(panel.w) * pixel_m;
-    let target = map_w_m / 4.0;
+/// A round scale-bar length (1, 2 or 5 × a power of ten) at most `target`, in the same unit.
+pub fn scale_bar_length(target: f64) -> f64 {
     let mag = 10f64.powf(target.log10().floor());
-    let len_m = [5.0, 2.0, 1.0]
+    [5.0, 2.0, 1.0]
         .iter()
         .map(|m| m * mag)
         .find(|l| *l <= target)
-        .unwrap_or(mag);
+        .unwrap_or(mag)
+}
+
+/// A white scale bar with a black outline and its length, bottom-left of the map.
+fn scale_bar(img: &mut RgbImage, panel: &Panel, pixel_m: f64) {
+    let map_w_m = f64::from(panel.w) * pixel_m;
+    let len_m = scale_bar_length(map_w_m / 4.0);
     let len_px = (len_m / pixel_m).round() as u32;
     if len_px < 4 || panel.h < 3 * GLYPH {
         return;

@@ -268,18 +268,7 @@ impl RockTable {
 
     /// Diameter (metres) with a share `u` of the rocks at or above it.
     fn sample(&self, u: f64) -> f64 {
-        let target = u * self.total();
-        let i = self
-            .cum
-            .partition_point(|&c| c > target)
-            .clamp(1, self.cum.len() - 1);
-        let (c0, c1) = (self.cum[i - 1], self.cum[i]);
-        let t = if c0 > c1 {
-            (c0 - target) / (c0 - c1)
-        } else {
-            0.0
-        };
-        (self.log_d[i - 1] + t * (self.log_d[i] - self.log_d[i - 1])).exp()
+        sfd::invert_descending(&self.cum, &self.log_d, u * self.total()).exp()
     }
 }
 

@@ -104,20 +104,26 @@ impl SizeTable {
     /// Diameter (km) whose cumulative count above it is `u` times the total.
     fn sample(&self, u: f64) -> f64 {
         let total = self.cum.first().copied().unwrap_or(0.0);
-        let target = u * total;
-        // `cum` decreases from `total` to 0; find the bracket.
-        let i = self
-            .cum
-            .partition_point(|&c| c > target)
-            .clamp(1, self.cum.len() - 1);
-        let (c0, c1) = (self.cum[i - 1], self.cum[i]);
-        let t = if c0 > c1 {
-            (c0 - target) / (c0 - c1)
-        } else {
-            0.0
-        };
-        10f64.powf(self.log_d[i - 1] + t * (self.log_d[i] - self.log_d[i - 1]))
+        10f64.powf(invert_descending(&self.cum, &self.log_d, u * total))
     }
+}
+
+/// The abscissa at which a tabulated decreasing cumulative count `cum` (over abscissae `x`,
+/// same length ≥ 2) falls to `target`, linearly interpolated within its bracket: the inverse-CDF
+/// step of the size tables.
+pub(crate) fn invert_descending(cum: &[f64], x: &[f64], target: f64) -> f64 {
+    let n = cum.len().min(x.len());
+    if n < 2 {
+        return x.first().copied().unwrap_or(0.0);
+    }
+    let i = cum[..n].partition_point(|&c| c > target).clamp(1, n - 1);
+    let (c0, c1) = (cum[i - 1], cum[i]);
+    let t = if c0 > c1 {
+        (c0 - target) / (c0 - c1)
+    } else {
+        0.0
+    };
+    x[i - 1] + t * (x[i] - x[i - 1])
 }
 
 /// Draw the craters of a square region `[x_min, x_min + side] × [y_min, y_min + side]` (metres)
