@@ -190,6 +190,8 @@ pub enum FilterError {
     BadTimeStep,
     /// Innovation covariance not positive definite (bad measurement covariance).
     Singular,
+    /// A keyframe-relative update before any keyframe was set.
+    NoKeyframe,
 }
 
 impl fmt::Display for FilterError {
@@ -198,6 +200,7 @@ impl fmt::Display for FilterError {
             Self::NotFinite => "non-finite input",
             Self::BadTimeStep => "time step out of range",
             Self::Singular => "innovation covariance not positive definite",
+            Self::NoKeyframe => "offset update without a keyframe",
         })
     }
 }
@@ -533,7 +536,7 @@ impl NavFilter {
     /// is stricter than its 3-dof meaning, never looser). Like a TRN fix, the share
     /// [`FilterConfig::fix_shared_fraction`] of its covariance is carried as ground error
     /// correlated over overlapping footprints (here: the keyframe's own error, common to every
-    /// frame registered on it). `Err(NotFinite)` without a keyframe.
+    /// frame registered on it). `Err(NoKeyframe)` before [`Self::set_keyframe`].
     pub fn update_offset(&mut self, z: &OffsetMeasurement) -> Result<UpdateOutcome, FilterError> {
         let c = z.cov_m2;
         let vals = [
@@ -546,7 +549,7 @@ impl NavFilter {
             z.footprint_m,
         ];
         let Some(key) = self.key else {
-            return Err(FilterError::NotFinite);
+            return Err(FilterError::NoKeyframe);
         };
         if !vals.iter().all(|v| v.is_finite()) {
             return Err(FilterError::NotFinite);

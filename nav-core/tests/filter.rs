@@ -107,9 +107,9 @@ fn filter_is_consistent_and_rejects_outliers() {
     assert!(last_err < 6.0);
 }
 
-#[test]
-fn bad_inputs_are_refused() {
-    let mut f = NavFilter::new(
+/// A filter at the origin, at rest, with metre-class uncertainties.
+fn filter_at_rest() -> NavFilter {
+    NavFilter::new(
         &InitialState {
             position_m: [0.0; 3],
             velocity_mps: [0.0; 3],
@@ -121,7 +121,12 @@ fn bad_inputs_are_refused() {
             gyro_bias_sigma: 1e-4,
         },
         FilterConfig::default(),
-    );
+    )
+}
+
+#[test]
+fn bad_inputs_are_refused() {
+    let mut f = filter_at_rest();
     assert!(f.propagate(0.0, [0.0; 3], [0.0; 3]).is_err());
     assert!(f.propagate(5.0, [0.0; 3], [0.0; 3]).is_err());
     assert!(f.propagate(0.01, [f64::NAN, 0.0, 0.0], [0.0; 3]).is_err());
@@ -406,26 +411,14 @@ fn keyframe_offsets_hold_the_position_where_the_imu_alone_drifts() {
 #[test]
 fn offsets_need_a_keyframe_and_a_covariance() {
     use nav_core::filter::{FilterError, OffsetMeasurement};
-    let mut f = NavFilter::new(
-        &InitialState {
-            position_m: [0.0; 3],
-            velocity_mps: [0.0; 3],
-            yaw_rad: 0.0,
-            position_sigma_m: 1.0,
-            velocity_sigma_mps: 1.0,
-            attitude_sigma_rad: 0.1,
-            accel_bias_sigma: 0.01,
-            gyro_bias_sigma: 1e-4,
-        },
-        FilterConfig::default(),
-    );
+    let mut f = filter_at_rest();
     let mut m = OffsetMeasurement {
         east_m: 1.0,
         north_m: 0.0,
         cov_m2: [[1.0, 0.0], [0.0, 1.0]],
         footprint_m: 10.0,
     };
-    assert_eq!(f.update_offset(&m), Err(FilterError::NotFinite));
+    assert_eq!(f.update_offset(&m), Err(FilterError::NoKeyframe));
     assert!(f.offset_cov_m2().is_none());
     f.set_keyframe();
     assert_eq!(f.keyframe_position_m(), Some([0.0, 0.0]));
