@@ -24,6 +24,9 @@ enum Commands {
     /// A fine truth DEM around a landing target (rocks, small craters, sub-metre roughness)
     /// over a coarse scene, with its truth safety map: GeoTIFF, PNG, JSON.
     LandingZone(cli::landing::Args),
+    /// How often the onboard hazard map calls a site safe that the truth calls unsafe, per
+    /// relief threshold, over landing zones of several presets and seeds: table and JSON.
+    HazardCalibrate(cli::hazard_calibrate::Args),
     /// Size, georeferencing, elevation and slope statistics of a DEM.
     Info(cli::info::Args),
     /// Resample a DEM to another pixel size and/or crop it by map coordinates.
@@ -80,6 +83,7 @@ fn dispatch(cli: Cli) -> anyhow::Result<()> {
     match &cli.command {
         Commands::Terrain(a) => cli::terrain::run(a),
         Commands::LandingZone(a) => cli::landing::run(a),
+        Commands::HazardCalibrate(a) => cli::hazard_calibrate::run(a),
         Commands::Info(a) => cli::info::run(a),
         Commands::Resample(a) => cli::resample::run(a),
         Commands::Demo(a) => cli::demo::run(a),

@@ -1,8 +1,14 @@
 //! Conversions from nav-core's results to their wire mirrors. Every float is copied, never
 //! recomputed, so the wire bytes of a result are a bit-exact image of the navigator's output.
 
-use crate::msg::{FrameResult, WireFix, WireMatchStats, WireNavError, WireNoFix, WireOutcome};
+use crate::job::{FinalPhase, HazardOutcome, JobOutput};
+use crate::msg::{
+    FrameResult, WireAimDecision, WireFix, WireHazard, WireHazardError, WireHazardStats,
+    WireKeyframe, WireMatchStats, WireNavError, WireNoFix, WireOffset, WireOutcome, WireSafeSite,
+};
 use nav_core::frame::FrameError;
+use nav_core::hazard::{AimDecision, HazardError, HazardStats};
+use nav_core::odometry::{OdometryError, OffsetFix};
 use nav_core::{FrameReport, NavError, NoFix, SurfError};
 
 /// The wire form of one navigator call's result for frame `frame_id`.
@@ -43,6 +49,8 @@ pub fn frame_result(frame_id: u32, r: &Result<FrameReport, NavError>) -> FrameRe
                 rejected_mutual: rep.match_stats.rejected_mutual,
                 dropped: rep.match_stats.dropped,
             },
+            offset: None,
+            hazard: None,
         },
         Err(e) => refused(frame_id, nav_error(e)),
     }
@@ -50,9 +58,14 @@ pub fn frame_result(frame_id: u32, r: &Result<FrameReport, NavError>) -> FrameRe
 
 /// A result for a frame the navigator never saw (refused before navigation).
 pub fn refused(frame_id: u32, e: WireNavError) -> FrameResult {
+    blank(frame_id, WireOutcome::Refused(e))
+}
+
+/// A result with `outcome` and every counter zero.
+fn blank(frame_id: u32, outcome: WireOutcome) -> FrameResult {
     FrameResult {
         frame_id,
-        outcome: WireOutcome::Refused(e),
+        outcome,
         features: 0,
         features_dropped: 0,
         matches: 0,
@@ -60,6 +73,116 @@ pub fn refused(frame_id: u32, e: WireNavError) -> FrameResult {
         msac_iterations: 0,
         affine: None,
         match_stats: WireMatchStats::default(),
+        offset: None,
+        hazard: None,
+    }
+}
+
+/// The wire result of a frame job ([`crate::job::execute`]) for frame `frame_id`; `fp` is the
+/// state the job left (the keyframe's CRC and the map's clearances are digested here, outside
+/// the measured window).
+pub fn job_result(frame_id: u32, out: &JobOutput, fp: &FinalPhase) -> FrameResult {
+    match out {
+        JobOutput::Locate(r) => frame_result(frame_id, r),
+        JobOutput::Keyframe(Ok(())) => {
+            let bytes = fp.keyframe.as_bytes();
+            let features = fp.keyframe.tile().map_or(0, |t| t.len());
+            let crc = bytes
+                .len()
+                .checked_sub(4)
+                .and_then(|at| bytes.get(at..))
+                .and_then(|b| b.try_into().ok())
+                .map_or(0, u32::from_le_bytes);
+            let features = features.min(u16::MAX as usize) as u16;
+            FrameResult {
+                features,
+                ..blank(
+                    frame_id,
+                    WireOutcome::Keyframe(WireKeyframe {
+                        features,
+                        tile_bytes: bytes.len() as u32,
+                        tile_crc: crc,
+                    }),
+                )
+            }
+        }
+        JobOutput::Keyframe(Err(e)) => refused(frame_id, odometry_error(e)),
+        JobOutput::Odometry(Ok(o)) => FrameResult {
+            offset: o.offset.as_ref().map(offset),
+            ..frame_result(frame_id, &Ok(o.report))
+        },
+        JobOutput::Odometry(Err(e)) => refused(frame_id, odometry_error(e)),
+        JobOutput::Hazard(HazardOutcome::BadFrame(e)) => {
+            refused(frame_id, nav_error(&NavError::Frame(*e)))
+        }
+        JobOutput::Hazard(HazardOutcome::Map(stats, decision)) => FrameResult {
+            hazard: Some(hazard_map(stats, decision, fp)),
+            ..blank(frame_id, WireOutcome::Hazard)
+        },
+        JobOutput::Hazard(HazardOutcome::Refused(e)) => FrameResult {
+            hazard: Some(WireHazard::Refused(match e {
+                HazardError::BadConfig => WireHazardError::BadConfig,
+                HazardError::TooCoarse => WireHazardError::TooCoarse,
+                HazardError::TooFine => WireHazardError::TooFine,
+                HazardError::TooSmall => WireHazardError::TooSmall,
+                HazardError::TooManySites { .. } => WireHazardError::TooManySites,
+            })),
+            ..blank(frame_id, WireOutcome::Hazard)
+        },
+    }
+}
+
+/// The map's counts, a CRC of every site's clearance, and the decision.
+fn hazard_map(stats: &HazardStats, decision: &AimDecision, fp: &FinalPhase) -> WireHazard {
+    let (cols, rows) = fp.hazards.size();
+    let mut digest = crate::packet::CRC32.digest();
+    for j in 0..rows {
+        for i in 0..cols {
+            digest.update(&fp.hazards.clearance_m(i, j).to_le_bytes());
+        }
+    }
+    WireHazard::Map(
+        WireHazardStats {
+            sites: stats.sites,
+            safe: stats.safe,
+            too_steep: stats.too_steep,
+            too_rough: stats.too_rough,
+            no_data: stats.no_data,
+            cols: cols.min(u16::MAX as usize) as u16,
+            rows: rows.min(u16::MAX as usize) as u16,
+            clearance_crc: digest.finalize(),
+        },
+        match decision {
+            AimDecision::Keep { clearance_m } => WireAimDecision::Keep(*clearance_m),
+            AimDecision::Move(s) => WireAimDecision::Move(WireSafeSite {
+                frame_px: s.frame_px,
+                clearance_m: s.clearance_m,
+                from_target_m: s.from_target_m,
+            }),
+            AimDecision::NoSite => WireAimDecision::NoSite,
+        },
+    )
+}
+
+fn offset(o: &OffsetFix) -> WireOffset {
+    WireOffset {
+        east_m: o.east_m,
+        north_m: o.north_m,
+        cov_m2: flat(&o.cov_m2),
+        footprint_m: o.footprint_m,
+        rotation_rad: o.rotation_rad,
+        scale: o.scale,
+    }
+}
+
+/// Wire form of a keyframe or odometry refusal.
+pub fn odometry_error(e: &OdometryError) -> WireNavError {
+    match e {
+        OdometryError::Frame(f) => nav_error(&NavError::Frame(*f)),
+        OdometryError::Surf(s) => nav_error(&NavError::Surf(*s)),
+        OdometryError::Tile(_) => WireNavError::KeyframeTile,
+        OdometryError::NoKeyframe => WireNavError::NoKeyframe,
+        OdometryError::BadPose => WireNavError::BadPose,
     }
 }
 

@@ -17,6 +17,8 @@
 //! 5. [`convert`]: nav-core results ↔ wire mirrors, bit for bit.
 //! 6. [`flight`]: the flight configuration (frame and keypoint budgets) shared by the firmware
 //!    and the host runner.
+//! 7. [`job`]: the frame jobs of a descent (TRN, keyframe capture, odometry, hazard map) as both
+//!    ends run them.
 //!
 //! With the default `std` feature the crate also holds the host side ([`host`]): the recorded
 //! frame set, the QEMU runner and its CLI (`cargo run --release -p hil-bridge -- run`).
@@ -28,7 +30,7 @@
 //! | [`packet::MAX_CHUNK_BYTES`] | 2048 | bytes of frame payload per chunk |
 //! | [`packet::MAX_PACKET_BYTES`] | 2086 | bytes before COBS |
 //! | [`packet::MAX_WIRE_BYTES`] | 2097 | bytes on the wire incl. both delimiters |
-//! | [`target::TX_PACKET_BYTES`] | 320 | bytes of the target's largest message packet |
+//! | [`target::TX_PACKET_BYTES`] | 448 | bytes of the target's largest message packet |
 //!
 //! `no_std`, no heap at its core; nothing panics on any input (the decoder is fuzzed).
 #![cfg_attr(not(feature = "std"), no_std)]
@@ -48,6 +50,7 @@ extern crate std;
 pub mod cobs;
 pub mod convert;
 pub mod flight;
+pub mod job;
 pub mod msg;
 pub mod packet;
 pub mod target;
@@ -56,7 +59,7 @@ pub mod target;
 pub mod host;
 
 /// Protocol version exchanged in the hello handshake; bumped on any incompatible change.
-pub const PROTOCOL_VERSION: u16 = 3;
+pub const PROTOCOL_VERSION: u16 = 4;
 
 pub use msg::Message;
 pub use packet::{PacketError, Received, Receiver, decode_packet, encode_packet, encode_wire};

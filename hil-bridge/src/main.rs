@@ -136,8 +136,9 @@ fn main() -> Result<()> {
             let tile = nav_core::Tile::parse(&set.tile).map_err(|e| anyhow::anyhow!("{e}"))?;
             let nav = nav_core::Navigator::new(tile, nav_core::NavConfig::default());
             let mut ws = Box::new(hil_bridge::host::runner::Workspace::new());
+            let mut fp: Box<hil_bridge::job::FinalPhase> = Box::default();
             for f in &set.frames {
-                let r = hil_bridge::host::runner::host_result(&nav, &mut ws, f);
+                let r = hil_bridge::host::runner::host_result(&nav, &mut ws, &mut fp, f);
                 let mut bytes = postcard::to_stdvec(&r)?;
                 for ft in ws.features().as_slice() {
                     let k = &ft.keypoint;

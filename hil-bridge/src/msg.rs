@@ -118,8 +118,70 @@ pub struct FrameHeader {
     pub payload_bytes: u32,
     /// CRC-32 (ISO-HDLC) of the whole payload: end-to-end check over the reassembled frame.
     pub payload_crc: u32,
-    /// Optional predicted pose.
+    /// Optional predicted pose (used by [`FrameJob::Locate`]).
     pub prior: Option<WirePrior>,
+    /// What the target does with the frame.
+    pub job: FrameJob,
+}
+
+/// What the target does with a frame: the four frame jobs of a descent. Every job runs
+/// the flight code of `nav_core` with the flight configuration, as the descent does.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum FrameJob {
+    /// 0: terrain-relative navigation on the reference tile, with the header's prior if any.
+    Locate,
+    /// 1: make this frame the keyframe (`nav_core::odometry::Keyframe::capture`); the
+    /// keyframe's pixel is the header's `pixel_m`.
+    Keyframe(WireKeyframePose),
+    /// 2: locate the frame on the keyframe held by the target
+    /// (`nav_core::odometry::locate_on_keyframe`), the prior made on the target by
+    /// `Keyframe::prior` from the filter's prediction below.
+    Odometry(WireOdometryPrior),
+    /// 3: build the hazard map from the frame (`nav_core::hazard::HazardMap::build`, flight
+    /// `HazardConfig`) and decide the aim (`HazardMap::decide`). A frame of its own: the
+    /// descent spends one frame on the map, not on odometry.
+    Hazard(WireAim),
+}
+
+/// Where guidance aims and the planned target, frame pixels `[x, y]`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct WireAim {
+    /// The current aim.
+    pub aim_px: [f32; 2],
+    /// The planned landing target.
+    pub target_px: [f32; 2],
+}
+
+/// The filter's knowledge at keyframe capture (mirrors `nav_core::odometry::KeyframePose`; the
+/// pixel size is the header's).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct WireKeyframePose {
+    /// Frame +x axis, clockwise from east, radians.
+    pub heading_rad: f64,
+    /// 1σ of the heading, radians.
+    pub heading_sigma_rad: f64,
+    /// Relative 1σ of the pixel size.
+    pub pixel_rel_sigma: f64,
+}
+
+/// The filter's prediction for an odometry frame (the arguments of
+/// `nav_core::odometry::Keyframe::prior`; the frame pixel is the header's).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct WireOdometryPrior {
+    /// Predicted displacement since the keyframe, metres `[east, north]`.
+    pub offset_m: [f64; 2],
+    /// Its covariance, m², row-major.
+    pub offset_cov_m2: [f64; 4],
+    /// Predicted frame +x axis, clockwise from east, radians.
+    pub heading_rad: f64,
+    /// 1σ of the heading, radians.
+    pub heading_sigma_rad: f64,
+    /// Relative 1σ of the pixel size.
+    pub pixel_rel_sigma: f64,
 }
 
 /// Consecutive payload bytes (H→T). Chunks must arrive in order without gaps.
@@ -255,6 +317,115 @@ pub enum WireNavError {
     BadPixelSize,
     /// SURF configuration out of range.
     SurfConfig,
+    /// A keyframe pose or odometry prior input not finite or out of range.
+    BadPose,
+    /// An odometry frame before any keyframe was captured.
+    NoKeyframe,
+    /// The keyframe tile could not be written or read back.
+    KeyframeTile,
+}
+
+/// A captured keyframe (T→H, in [`WireOutcome::Keyframe`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct WireKeyframe {
+    /// SURF features in the keyframe tile.
+    pub features: u16,
+    /// Keyframe tile blob, bytes.
+    pub tile_bytes: u32,
+    /// CRC-32 stored in the keyframe tile (covers features and raster: a bit-exact digest).
+    pub tile_crc: u32,
+}
+
+/// Displacement since the keyframe (mirrors `nav_core::odometry::OffsetFix`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct WireOffset {
+    /// East, metres.
+    pub east_m: f64,
+    /// North, metres.
+    pub north_m: f64,
+    /// Covariance, m², row-major (east, north).
+    pub cov_m2: [f64; 4],
+    /// Frame footprint, metres.
+    pub footprint_m: f64,
+    /// Rotation of the frame on the keyframe, radians.
+    pub rotation_rad: f64,
+    /// Scale, keyframe raster px per frame px.
+    pub scale: f64,
+}
+
+/// The chosen safe site (mirrors `nav_core::hazard::SafeSite`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct WireSafeSite {
+    /// Position, frame pixels `[x, y]`.
+    pub frame_px: [f32; 2],
+    /// Clearance, metres.
+    pub clearance_m: f32,
+    /// Distance from the target, metres.
+    pub from_target_m: f32,
+}
+
+/// A hazard map (T→H): its counts, a digest of every site's clearance, the chosen site.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct WireHazardStats {
+    /// Sites judged.
+    pub sites: u32,
+    /// Safe sites.
+    pub safe: u32,
+    /// Too steep.
+    pub too_steep: u32,
+    /// Too rough (relief alone).
+    pub too_rough: u32,
+    /// No data under the footprint.
+    pub no_data: u32,
+    /// Lattice columns.
+    pub cols: u16,
+    /// Lattice rows.
+    pub rows: u16,
+    /// CRC-32 (ISO-HDLC) of every site's clearance (`f32` metres, little-endian, row-major):
+    /// the whole map, bit for bit, in four bytes.
+    pub clearance_crc: u32,
+}
+
+/// What the hazard step made of a frame.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum WireHazard {
+    /// 0: a map, and its decision for the aim.
+    Map(WireHazardStats, WireAimDecision),
+    /// 1: no map (mirrors `nav_core::hazard::HazardError`).
+    Refused(WireHazardError),
+}
+
+/// A map's decision for the aim (mirrors `nav_core::hazard::AimDecision`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum WireAimDecision {
+    /// 0: keep the aim; its clearance, m.
+    Keep(f32),
+    /// 1: fly to this site.
+    Move(WireSafeSite),
+    /// 2: nothing within reach qualifies.
+    NoSite,
+}
+
+/// Why no hazard map was made.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum WireHazardError {
+    /// Settings not finite or not positive.
+    BadConfig,
+    /// Frame pixels too coarse for the footprint.
+    TooCoarse,
+    /// Frame pixels too fine for the footprint window.
+    TooFine,
+    /// Frame smaller than one footprint.
+    TooSmall,
+    /// More sites than the map holds.
+    TooManySites,
 }
 
 /// Outcome of one frame.
@@ -268,6 +439,11 @@ pub enum WireOutcome {
     NoFix(WireNoFix),
     /// The frame was refused before navigation.
     Refused(WireNavError),
+    /// The frame became the keyframe ([`FrameJob::Keyframe`]).
+    Keyframe(WireKeyframe),
+    /// The frame was mapped for hazards ([`FrameJob::Hazard`]; the map is in
+    /// [`FrameResult::hazard`]).
+    Hazard,
 }
 
 /// Matching counters (mirrors `nav_core::matching::MatchStats`).
@@ -308,6 +484,10 @@ pub struct FrameResult {
     pub affine: Option<WireAffine>,
     /// Matching counters.
     pub match_stats: WireMatchStats,
+    /// The displacement since the keyframe, for an odometry fix.
+    pub offset: Option<WireOffset>,
+    /// The hazard map, for [`FrameJob::Hazard`].
+    pub hazard: Option<WireHazard>,
 }
 
 /// What one frame cost on the target (T→H), sent before its [`FrameResult`].

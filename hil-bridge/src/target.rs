@@ -15,9 +15,9 @@ use crate::msg::{
 use crate::packet::{CRC32, MAX_CHUNK_BYTES, PacketError, Received, Receiver, encode_wire};
 use core::fmt;
 
-/// Largest message the target sends, bytes before COBS (a [`crate::msg::FrameResult`] with a fix
-/// is the largest; `tests/protocol.rs` checks it fits).
-pub const TX_PACKET_BYTES: usize = 320;
+/// Largest message the target sends, bytes before COBS (a [`crate::msg::FrameResult`] with an
+/// odometry fix, its offset and a hazard map is the largest; `tests/protocol.rs` checks it fits).
+pub const TX_PACKET_BYTES: usize = 448;
 /// Receive block size: bytes asked of the reader per call.
 pub const RX_BLOCK_BYTES: usize = 512;
 

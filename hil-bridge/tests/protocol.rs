@@ -57,8 +57,9 @@ fn golden() -> Vec<(u16, Message<'static>, &'static str)> {
                 payload_bytes: 160_000,
                 payload_crc: 0xDEAD_BEEF,
                 prior: None,
+                job: FrameJob::Locate,
             }),
-            "00 02 02 07 02 07 c8 01 c8 01 01 03 20 41 09 80 e2 09 ef fd b6 f5 0d 05 7c b0 32 6e 00",
+            "00 02 02 07 02 07 c8 01 c8 01 01 03 20 41 09 80 e2 09 ef fd b6 f5 0d 01 05 2a e0 df 8b 00",
         ),
         (
             3,
@@ -76,7 +77,7 @@ fn golden() -> Vec<(u16, Message<'static>, &'static str)> {
         (
             5,
             Message::FrameResult(hil_bridge::convert::refused(9, WireNavError::TooLarge)),
-            "00 02 05 05 06 09 02 02 01 01 01 01 01 01 01 01 01 01 05 57 1d 8a 3d 00",
+            "00 02 05 05 06 09 02 02 01 01 01 01 01 01 01 01 01 01 01 01 05 3f 88 25 d7 00",
         ),
         (6, Message::Shutdown, "00 02 06 06 0b 28 7c 1e 6c 00"),
     ]
@@ -85,7 +86,7 @@ fn golden() -> Vec<(u16, Message<'static>, &'static str)> {
 #[test]
 fn golden_vectors_encode_and_decode() {
     assert_eq!(
-        PROTOCOL_VERSION, 3,
+        PROTOCOL_VERSION, 4,
         "a version bump needs new golden vectors"
     );
     for (seq, msg, bytes) in golden() {
@@ -140,6 +141,38 @@ fn every_message() -> Vec<Message<'static>> {
             rejected_mutual: 1,
             dropped: 0,
         },
+        offset: None,
+        hazard: None,
+    };
+    // The largest result: an odometry fix with its offset (a hazard map comes in a result of
+    // its own, but both together must fit too).
+    let odometry = FrameResult {
+        offset: Some(WireOffset {
+            east_m: -12.25,
+            north_m: 3.5e-3,
+            cov_m2: [0.04, -1e-3, -1e-3, 0.05],
+            footprint_m: 80.0,
+            rotation_rad: -0.004,
+            scale: 0.333_333_3,
+        }),
+        hazard: Some(WireHazard::Map(
+            WireHazardStats {
+                sites: 4096,
+                safe: 1234,
+                too_steep: 56,
+                too_rough: 2800,
+                no_data: 6,
+                cols: 64,
+                rows: 64,
+                clearance_crc: 0x1234_5678,
+            },
+            WireAimDecision::Move(WireSafeSite {
+                frame_px: [123.0, 87.0],
+                clearance_m: 4.8,
+                from_target_m: 11.8,
+            }),
+        )),
+        ..result
     };
     vec![
         Message::Hello(Hello {
@@ -172,6 +205,7 @@ fn every_message() -> Vec<Message<'static>> {
                 scale: 0.5,
                 scale_sigma: 0.02,
             }),
+            job: FrameJob::Locate,
         }),
         Message::FrameChunk(FrameChunk {
             frame_id: 3,
@@ -188,6 +222,67 @@ fn every_message() -> Vec<Message<'static>> {
             outcome: WireOutcome::NoFix(WireNoFix::InconsistentWithPrior),
             affine: None,
             ..result
+        }),
+        Message::FrameResult(odometry),
+        Message::FrameResult(FrameResult {
+            outcome: WireOutcome::Keyframe(WireKeyframe {
+                features: 16,
+                tile_bytes: 25_080,
+                tile_crc: 0xCAFE_F00D,
+            }),
+            ..hil_bridge::convert::refused(8, WireNavError::Empty)
+        }),
+        Message::FrameResult(FrameResult {
+            outcome: WireOutcome::Hazard,
+            hazard: Some(WireHazard::Refused(WireHazardError::TooFine)),
+            ..hil_bridge::convert::refused(9, WireNavError::Empty)
+        }),
+        Message::FrameResult(hil_bridge::convert::refused(10, WireNavError::NoKeyframe)),
+        Message::FrameHeader(FrameHeader {
+            frame_id: 11,
+            width: 200,
+            height: 200,
+            pixel_m: 0.4,
+            format: SampleFormat::HeightF32Le,
+            payload_bytes: 160_000,
+            payload_crc: 2,
+            prior: None,
+            job: FrameJob::Odometry(WireOdometryPrior {
+                offset_m: [3.2, -2.4],
+                offset_cov_m2: [16.0, 0.0, 0.0, 16.0],
+                heading_rad: 0.41,
+                heading_sigma_rad: 0.0087,
+                pixel_rel_sigma: 1e-3,
+            }),
+        }),
+        Message::FrameHeader(FrameHeader {
+            frame_id: 12,
+            width: 200,
+            height: 200,
+            pixel_m: 0.6,
+            format: SampleFormat::HeightF32Le,
+            payload_bytes: 160_000,
+            payload_crc: 3,
+            prior: None,
+            job: FrameJob::Keyframe(WireKeyframePose {
+                heading_rad: 0.41,
+                heading_sigma_rad: 0.0087,
+                pixel_rel_sigma: 1e-3,
+            }),
+        }),
+        Message::FrameHeader(FrameHeader {
+            frame_id: 13,
+            width: 200,
+            height: 200,
+            pixel_m: 0.4,
+            format: SampleFormat::HeightF32Le,
+            payload_bytes: 160_000,
+            payload_crc: 4,
+            prior: None,
+            job: FrameJob::Hazard(WireAim {
+                aim_px: [125.0, 115.0],
+                target_px: [125.0, 115.0],
+            }),
         }),
         Message::FrameCost(FrameCost {
             frame_id: 3,
@@ -342,6 +437,7 @@ fn frame_stream(frame_id: u32, payload: &[u8], first_seq: u16) -> Vec<Vec<u8>> {
         payload_bytes: payload.len() as u32,
         payload_crc: payload_crc(payload),
         prior: None,
+        job: FrameJob::Locate,
     };
     let mut v = vec![wire(first_seq, &Message::FrameHeader(header))];
     for (i, c) in payload.chunks(256).enumerate() {
@@ -538,6 +634,7 @@ fn a_payload_crc_mismatch_aborts_the_frame() {
         payload_bytes: bytes.len() as u32,
         payload_crc: payload_crc(&bytes) ^ 1,
         prior: None,
+        job: FrameJob::Locate,
     };
     let mut input = wire(
         0,
@@ -582,6 +679,7 @@ fn oversized_and_out_of_order_frames_are_refused() {
         payload_bytes: 65 * 2 * 4,
         payload_crc: 0,
         prior: None,
+        job: FrameJob::Locate,
     };
     let mut input = wire(
         0,

@@ -53,7 +53,39 @@ fn firmware_is_bit_exact_and_within_the_instruction_budget() {
     opts.frames = Some(6);
     opts.progress = true;
     let report = run(&opts).expect("HIL run");
-    assert_eq!(report.frames, 6);
+    // Six TRN stress frames, then the final phase's chain, whole.
+    let final_phase: Vec<_> = report
+        .per_frame
+        .iter()
+        .filter(|f| f.job != "locate")
+        .collect();
+    assert_eq!(report.frames, 6 + final_phase.len());
+    assert!(
+        final_phase.len() >= 8,
+        "{} final-phase frames",
+        final_phase.len()
+    );
+    // Keyframes captured, odometry fixes within a metre of the truth with an honest σ, and the
+    // hazard maps made with a site chosen.
+    let keyframes = final_phase.iter().filter(|f| f.outcome == "keyframe");
+    assert_eq!(keyframes.count(), 3);
+    let offsets: Vec<_> = final_phase
+        .iter()
+        .filter_map(|f| Some((f.offset_error_m?, f.offset_sigma_m?)))
+        .collect();
+    assert_eq!(offsets.len(), 3, "{final_phase:?}");
+    for (err, sigma) in offsets {
+        assert!(
+            err < 1.0 && err < 3.5 * sigma.max(0.01),
+            "offset error {err} m, σ {sigma}"
+        );
+    }
+    let maps: Vec<_> = final_phase
+        .iter()
+        .filter(|f| f.hazard_sites.is_some())
+        .collect();
+    assert_eq!(maps.len(), 2);
+    assert!(maps.iter().all(|m| m.site_from_target_m.is_some()));
     assert_eq!(
         report.bit_exact_frames, report.frames,
         "target and host results differ"
@@ -69,7 +101,7 @@ fn firmware_is_bit_exact_and_within_the_instruction_budget() {
     assert!(report.link_errors_injected >= 3);
     assert_eq!(report.link_errors_recovered, report.link_errors_injected);
     let s = report.target_status;
-    assert_eq!(s.frames_done, 6, "{s:?}");
+    assert_eq!(s.frames_done as usize, report.frames, "{s:?}");
     assert!(
         s.crc_errors + s.cobs_errors + s.seq_gaps + s.duplicates > 0,
         "{s:?}"

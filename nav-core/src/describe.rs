@@ -146,6 +146,7 @@ fn haar_boxes_interior(
 /// Dominant orientation (radians, [0, 2π)) from Gaussian-weighted Haar responses within 6σ and a
 /// sliding 60° window. Every window's sums start from zero; angles are wrapped into [0, 2π) before
 /// windowing and the result is `atan2(Σdy, Σdx)` of the best window.
+#[inline(never)] // like `Kernel::row_any`: a stable instruction count whoever calls `extract`
 pub(crate) fn orientation(ii: &Integral<'_>, kp: &Keypoint, w: &Weights) -> f32 {
     let s = kp.scale_px;
     let k = round_i(ORIENT_HAAR_HALF_PER_SIGMA * s).max(1);
@@ -236,6 +237,7 @@ fn best_window(samples: &[(f32, f32, f32)]) -> (f32, f32, f32) {
 /// The 64-d descriptor: a 20σ square rotated to the keypoint's orientation, 4 × 4 sub-regions of
 /// 5 × 5 samples spaced σ apart, Haar half-width round(σ), responses rotated into the keypoint
 /// frame and Gaussian-weighted (σ_w = 3.3σ), normalised to unit length.
+#[inline(never)] // see `orientation`
 pub(crate) fn descriptor(ii: &Integral<'_>, kp: &Keypoint, w: &Weights) -> Descriptor {
     let s = kp.scale_px * DESC_SPACING_PER_SIGMA;
     let k = round_i(s).max(1);

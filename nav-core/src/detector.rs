@@ -311,6 +311,11 @@ impl Kernel {
     }
 
     /// [`Kernel::row`] for the octave's sampling step.
+    ///
+    /// Never inlined: compiled on its own the response loop keeps its registers; inlined into
+    /// `extract` (which it was once `extract` had a second caller, the keyframe capture) the
+    /// firmware's worst TRN frame cost 1.2 M instructions more (HIL profile, session 12).
+    #[inline(never)]
     fn row_any(&self, step: usize, data: &[u32], idx0: usize, out: &mut [f32]) -> usize {
         match step {
             1 => self.row::<1>(data, idx0, out),

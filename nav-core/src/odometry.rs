@@ -230,6 +230,15 @@ impl<const BYTES: usize> Keyframe<BYTES> {
         Ok(())
     }
 
+    /// The keyframe tile blob (empty without a keyframe); its last four bytes are the tile's
+    /// CRC-32, a digest of the whole keyframe.
+    pub fn as_bytes(&self) -> &[u8] {
+        if self.pose.is_none() {
+            return &[];
+        }
+        self.buf.get(..self.len).unwrap_or(&[])
+    }
+
     /// The keyframe as a tile (CRC checked), to build a [`Navigator`] on.
     pub fn tile(&self) -> Result<Tile<'_>, OdometryError> {
         if self.pose.is_none() {

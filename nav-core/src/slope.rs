@@ -134,7 +134,15 @@ pub fn slope_into_binned_smoothed<'b, const CAP: usize>(
     let mut smo = [[f32::NAN; CAP]; 3];
     let mut num = [0.0f32; CAP];
     let mut den = [0.0f32; CAP];
-    let get = |rows: &[[f32; CAP]], ring: usize, r: isize, c: isize| -> f32 {
+    // A function, not a closure: the compiler inlines it into every caller, which keeps the
+    // firmware's slope stage at the same cost whoever calls this (HIL profile, session 12).
+    #[inline(always)]
+    fn ring_get<const CAP: usize>(
+        rows: &[[f32; CAP]],
+        ring: usize,
+        (r, c): (isize, isize),
+        (w, h): (usize, usize),
+    ) -> f32 {
         if r < 0 || c < 0 || r as usize >= h || c as usize >= w {
             return f32::NAN;
         }
@@ -142,6 +150,9 @@ pub fn slope_into_binned_smoothed<'b, const CAP: usize>(
             .and_then(|row| row.get(c as usize))
             .copied()
             .unwrap_or(f32::NAN)
+    }
+    let get = |rows: &[[f32; CAP]], ring: usize, r: isize, c: isize| -> f32 {
+        ring_get(rows, ring, (r, c), (w, h))
     };
     for r_in in 0..h + 2 + rad {
         if r_in < h

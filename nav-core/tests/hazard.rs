@@ -1,9 +1,9 @@
 //! The hazard map on frames whose answer is known: flat ground, a tilted plane, one rock, a
-//! hole in the data.
+//! hole in the data, and the map's decision for the aim.
 
 use nav_core::DemPatch;
 use nav_core::flight::HazardMap;
-use nav_core::hazard::{HazardConfig, HazardError};
+use nav_core::hazard::{AimDecision, HazardConfig, HazardError};
 
 const SIDE: usize = 120;
 const PX: f32 = 0.4;
@@ -48,9 +48,9 @@ fn a_plane_steeper_than_the_limit_is_unsafe() {
     assert_eq!(map.build(&dem, &cfg).unwrap().too_steep, 0);
 }
 
-#[test]
-fn a_rock_at_the_target_moves_the_site_off_it() {
-    // A 0.5 m half-ellipsoid rock, 1.6 m across, centred in the frame.
+/// A 0.5 m half-ellipsoid rock, 1.6 m across, centred in the frame: (its centre in metres, the
+/// heights).
+fn rock_frame() -> (f32, Vec<f32>) {
     let c = (SIDE as f32 - 1.0) / 2.0 * PX;
     let z = frame(|x, y| {
         let r = (x - c).hypot(y - c) / 0.8;
@@ -60,6 +60,12 @@ fn a_rock_at_the_target_moves_the_site_off_it() {
             0.0
         }
     });
+    (c, z)
+}
+
+#[test]
+fn a_rock_at_the_target_moves_the_site_off_it() {
+    let (c, z) = rock_frame();
     let dem = DemPatch::new_checked(&z, SIDE, SIDE, PX).unwrap();
     let mut map = Box::new(HazardMap::new());
     let cfg = HazardConfig::default();
@@ -144,4 +150,33 @@ fn a_tight_gap_is_taken_only_when_nothing_roomier_is_in_reach() {
     assert!((gap.frame_px[0] * PX - 32.0).abs() < 2.5, "{gap:?}");
     assert!(gap.clearance_m < cfg.clearance_m, "{gap:?}");
     assert!(map.nearest_with(target, cfg.clearance_m, &near).is_none());
+}
+
+#[test]
+fn the_decision_keeps_a_roomy_aim_and_moves_one_on_a_rock() {
+    // The rock of `a_rock_at_the_target_moves_the_site_off_it`, and an aim 10 m from it.
+    let (c, z) = rock_frame();
+    let dem = DemPatch::new_checked(&z, SIDE, SIDE, PX).unwrap();
+    let mut map = Box::new(HazardMap::new());
+    let cfg = HazardConfig::default();
+    map.build(&dem, &cfg).unwrap();
+    let on_rock = [c / PX; 2];
+    let clear = [(c - 10.0) / PX, c / PX];
+    match map.decide(clear, on_rock, &cfg) {
+        AimDecision::Keep { clearance_m } => assert!(clearance_m >= cfg.clearance_m),
+        other => panic!("a roomy aim must be kept: {other:?}"),
+    }
+    match map.decide(on_rock, on_rock, &cfg) {
+        AimDecision::Move(site) => {
+            assert_eq!(Some(site), map.choose(on_rock, &cfg));
+            assert!(site.clearance_m >= cfg.clearance_m, "{site:?}");
+        }
+        other => panic!("an aim on the rock must move: {other:?}"),
+    }
+    // Nothing safe within a 0.5 m reach of the rock: the aim stays, and says so.
+    let short = HazardConfig {
+        max_reach_m: 0.5,
+        ..cfg
+    };
+    assert_eq!(map.decide(on_rock, on_rock, &short), AimDecision::NoSite);
 }

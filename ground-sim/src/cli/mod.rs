@@ -5,6 +5,7 @@
 pub mod demo;
 pub mod descent;
 pub mod eval;
+pub mod hazard_calibrate;
 pub mod info;
 pub mod insar;
 pub mod landing;

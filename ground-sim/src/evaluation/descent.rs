@@ -10,7 +10,7 @@
 use nav_core::filter::{
     FilterConfig, FixMeasurement, InitialState, NavFilter, OffsetMeasurement, UpdateOutcome,
 };
-use nav_core::hazard::HazardConfig;
+use nav_core::hazard::{AimDecision, HazardConfig};
 use nav_core::odometry::KeyframePose;
 use nav_core::{Navigator, Prior};
 use rand::{RngExt, SeedableRng};
@@ -527,9 +527,10 @@ pub fn fly(
     let mut last_hazard = None;
     // The pictured run keeps its last hazard map.
     let keep_history = run == 0;
-    // One decision: the first map that finds a site fixes the aim. Later, finer frames would
-    // only re-read the same ground with their own noise (measured: re-deciding on every frame
-    // moved the aim 7 times in 8 maps and landed no safer).
+    // One decision: the first map that keeps the aim or finds a site fixes it. Later, finer
+    // frames would only re-read the same ground with their own noise (measured: re-deciding on
+    // every frame moved the aim 7 times in 8 maps and landed no safer), and each map costs the
+    // frame's odometry.
     let mut site_chosen = false;
     let mut final_nees_sum = 0.0;
     // The truth position of the keyframe, to score offsets (never seen by the flyer).
@@ -701,7 +702,14 @@ pub fn fly(
             if let Ok(frame) = synth_frame_on(terrain, &pose, &cfg.sensor, rng.random::<u64>()) {
                 let input = (&frame.heights_m[..], frame.width, frame.height, pixel_m);
                 let yaw_sigma = filt.yaw_sigma_rad();
-                if !cfg.odometry {
+                // A frame does one job, as on the flight target: a hazard map (≈ 7–15 M
+                // instructions) beside a keyframe capture (≈ 14 M) would break the 20 M budget
+                // (docs/bounds.md), so the map's frame gives up its odometry.
+                let map_due = cfg.hazard_avoidance
+                    && !site_chosen
+                    && pixel_m <= cfg.hazard_max_pixel_m
+                    && agl >= cfg.hazard_min_agl_m;
+                if !cfg.odometry || map_due {
                     // Frames for the hazard map only.
                 } else if key.needs_refresh(pixel_m) || odo_misses >= cfg.odometry_max_misses {
                     let kp = KeyframePose {
@@ -772,11 +780,7 @@ pub fn fly(
                         }
                     }
                 }
-                if cfg.hazard_avoidance
-                    && !site_chosen
-                    && pixel_m <= cfg.hazard_max_pixel_m
-                    && agl >= cfg.hazard_min_agl_m
-                {
+                if map_due {
                     let dem = nav_core::DemPatch::new_checked(
                         &frame.heights_m,
                         frame.width,
@@ -789,28 +793,20 @@ pub fn fly(
                         let pe = filt.position_m();
                         let h_est = -filt.yaw_rad();
                         let (w, hh) = (frame.width, frame.height);
-                        // Keep the aim while it stays safe with its clearance; else choose anew
-                        // around the original target.
+                        // One decision (`HazardMap::decide`, as the target makes it): keep an
+                        // aim that is safe with its clearance, else move it near the target.
                         let aim_px =
                             en_to_frame_px([aim[0] - pe[0], aim[1] - pe[1]], h_est, pixel_m, w, hh);
-                        let (i, j) = hazards.nearest_site(aim_px);
-                        let clear = hazards.clearance_m(i, j);
-                        if clear < cfg.hazard.clearance_m {
-                            let target_px = en_to_frame_px(
-                                [target[0] - pe[0], target[1] - pe[1]],
-                                h_est,
-                                pixel_m,
-                                w,
-                                hh,
-                            );
-                            // An aim that is safe but tight moves only to a roomier site; an
-                            // unsafe one takes the best there is.
-                            let pick = if clear > 0.0 {
-                                hazards.nearest_with(target_px, cfg.hazard.clearance_m, &cfg.hazard)
-                            } else {
-                                hazards.choose(target_px, &cfg.hazard)
-                            };
-                            if let Some(site) = pick {
+                        let target_px = en_to_frame_px(
+                            [target[0] - pe[0], target[1] - pe[1]],
+                            h_est,
+                            pixel_m,
+                            w,
+                            hh,
+                        );
+                        match hazards.decide(aim_px, target_px, &cfg.hazard) {
+                            AimDecision::Keep { .. } => site_chosen = true,
+                            AimDecision::Move(site) => {
                                 let d = frame_px_to_en(site.frame_px, h_est, pixel_m, w, hh);
                                 aim = [pe[0] + d[0], pe[1] + d[1]];
                                 // Where that spot truly is: the frame is centred on the truth.
@@ -818,9 +814,8 @@ pub fn fly(
                                 aim_truth = [p[0] + dt[0], p[1] + dt[1]];
                                 out.site_changes += 1;
                                 site_chosen = true;
-                            } else {
-                                out.hazard_no_site += 1;
                             }
+                            AimDecision::NoSite => out.hazard_no_site += 1,
                         }
                         if keep_history {
                             last_hazard = Some(HazardPicture {

@@ -1,13 +1,15 @@
 //! # Umbra HIL firmware
 //!
 //! nav-core on a Cortex-M (QEMU `mps2-an386` Cortex-M4 or `mps2-an500` Cortex-M7), the
-//! reference tile linked into flash, frames received over the hil-bridge link, a fix (or typed
-//! no-fix) and the frame's cost sent back.
+//! reference tile linked into flash, frames received over the hil-bridge link, each frame's job
+//! run (TRN on the tile, keyframe capture, odometry on the keyframe, hazard map: see
+//! [`hil_bridge::job`]), its result (fix or typed no-fix, offset, hazard map digest and site)
+//! and its cost sent back.
 //!
 //! * Link: semihosting FIFOs `hil-link.rx` / `hil-link.tx` in QEMU's working directory (fast);
 //!   the protocol state machine ([`hil_bridge::target::TargetLink`]) only sees `embedded_io`
 //!   traits, so a UART driver is a drop-in replacement.
-//! * Cost: the navigator call sits between [`hil_frame_begin`] and [`hil_frame_end`]; the host's
+//! * Cost: the frame job sits between [`hil_frame_begin`] and [`hil_frame_end`]; the host's
 //!   TCG plugin counts the instructions between them; SysTick gives the target's own view.
 //! * Failure: a panic or a fault ends QEMU through semihosting with exit code 1, never a hang.
 #![no_std]
@@ -35,9 +37,10 @@ use cortex_m_semihosting::debug::{self, EXIT_FAILURE, EXIT_SUCCESS};
 use cortex_m_semihosting::hprintln;
 use hil_bridge::convert;
 use hil_bridge::flight::{MAX_FRAME_PX, MAX_FRAME_WIDTH, Workspace};
+use hil_bridge::job::{self, FinalPhase};
 use hil_bridge::msg::{FrameCost, Message};
 use hil_bridge::target::{Event, TargetInfo, TargetLink};
-use nav_core::{DemPatch, NavConfig, NavError, Navigator, Tile};
+use nav_core::{NavConfig, Navigator, Tile};
 #[cfg(not(feature = "uart-link"))]
 use semihosting::HostFile;
 use timer::{CycleCounter, SysTickCounter};
@@ -80,6 +83,7 @@ fn main() -> ! {
     // .bss/.data, no copy through the stack).
     static mut HEIGHTS: [f32; MAX_FRAME_PX] = [0.0; MAX_FRAME_PX];
     static mut WORKSPACE: Workspace = Workspace::new();
+    static mut FINAL_PHASE: FinalPhase = FinalPhase::new();
 
     stack::paint();
     if cfg!(feature = "selftest-panic") {
@@ -115,23 +119,15 @@ fn main() -> ! {
     };
     let mut link = TargetLink::new(info, HEIGHTS);
     let ws = WORKSPACE;
+    let fp = FINAL_PHASE;
     let mut window = 0u32;
     loop {
         match link.poll(&mut rx, &mut tx) {
             Ok(Event::Frame(f)) => {
                 let h = f.header;
-                let prior = h.prior.as_ref().map(convert::prior);
                 let t0 = clock.now();
                 hil_frame_begin(window);
-                let result = match DemPatch::new_checked(
-                    link.heights_m(),
-                    h.width as usize,
-                    h.height as usize,
-                    h.pixel_m,
-                ) {
-                    Ok(dem) => nav.locate_dem(ws, &dem, prior.as_ref()),
-                    Err(e) => Err(NavError::Frame(e)),
-                };
+                let out = job::execute(&nav, ws, fp, &h, link.heights_m());
                 hil_frame_end(window);
                 let cycles = clock.now().wrapping_sub(t0);
                 let cost = FrameCost {
@@ -146,7 +142,7 @@ fn main() -> ! {
                     h.frame_id, cycles, cost.stack_peak_bytes
                 );
                 window = window.wrapping_add(1);
-                let res = convert::frame_result(h.frame_id, &result);
+                let res = convert::job_result(h.frame_id, &out, fp);
                 if link.send(&mut tx, &Message::FrameCost(cost)).is_err()
                     || link.send(&mut tx, &Message::FrameResult(res)).is_err()
                 {

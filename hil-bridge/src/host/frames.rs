@@ -1,5 +1,6 @@
 //! The recorded frame set: a reference tile and DEM frames with known poses, generated from the
-//! built-in synthetic terrain, plus a stress set for the timing bound. Written to a directory so
+//! built-in synthetic terrain, a stress set for the timing bound, and a descent's final phase
+//! (keyframes, odometry frames and a hazard map from 4 m to 0.4 m pixels over a landing zone). Written to a directory so
 //! that the firmware build can link the tile and any run can replay the same frames; regenerate
 //! with `hil-bridge gen`. The link protocol does not care where frames come from: a closed-loop
 //! simulator can stream its own.
@@ -9,8 +10,12 @@
 //! `200 × 200` pixels at 10 m is sampled bilinearly from the DEM around a centre with a heading:
 //! frame `(col, row)` sits at DEM `c + R(heading)·((col, row) − 99.5)`.
 
+use crate::msg::{FrameJob, WireAim, WireKeyframePose, WireOdometryPrior};
 use anyhow::{Context, Result, bail};
+use ground_sim::dem::Dem;
+use ground_sim::flyer::frames::{FramePose, SensorModel, Terrain, synth_frame_on};
 use ground_sim::reference::tile::{GeoGrid, MAX_TILE_FEATURES, build_tile};
+use ground_sim::terrain::landing::{LandingZoneConfig, landing_zone};
 use ground_sim::terrain::{Preset, TerrainParams, Window, generate};
 use nav_core::{SLOPE_NODATA, SlopeImage, SurfConfig};
 use serde::{Deserialize, Serialize};
@@ -26,7 +31,7 @@ pub const TERRAIN_SIDE: usize = 600;
 /// Tile ground sample distance, metres.
 pub const TILE_PIXEL_M: f64 = 20.0;
 /// Format version of `frames.bin` (bumped on any change of its layout).
-pub const FRAMES_FORMAT_VERSION: u32 = 1;
+pub const FRAMES_FORMAT_VERSION: u32 = 2;
 /// Terrain seed.
 pub const TERRAIN_SEED: u64 = 8;
 /// Gentle-terrain frames (relief scaled by [`GENTLE_RELIEF`]) sent with a prior.
@@ -61,6 +66,19 @@ pub enum FrameKind {
     Textured,
     /// Dense random blobs at the detector's matchable scales: the keypoint budget overflows.
     MaxKeypoints,
+    /// Final phase: a frame below the tile's reach made the keyframe.
+    Keyframe,
+    /// Final phase: a frame located on the keyframe (odometry).
+    Odometry,
+    /// Final phase: the hazard map and the safe-site choice.
+    Hazard,
+    /// Final phase worst case for odometry: a textured frame located on the keyframe with a
+    /// wide prior (features fail, the area search runs its widest window).
+    StressOdometry,
+    /// Final phase worst case for the hazard map: gentle ground where nearly every site is
+    /// safe, so every footprint is read twice (plane fit and relief), and a boulder on the aim,
+    /// so the choice scans the whole lattice.
+    StressHazard,
 }
 
 /// Ground truth of a terrain frame.
@@ -93,6 +111,10 @@ pub struct FrameMeta {
     pub truth: Option<Truth>,
     /// Prior sent with the frame.
     pub prior: Option<crate::msg::WirePrior>,
+    /// The job the target runs on it.
+    pub job: FrameJob,
+    /// For odometry frames: the true displacement since the keyframe, metres `[east, north]`.
+    pub truth_offset_m: Option<[f64; 2]>,
 }
 
 /// A frame: description and heights (metres, row-major).
@@ -339,6 +361,8 @@ pub fn generate_set(terrain_frames: usize) -> Result<FrameSet> {
                 pixel_m: FRAME_PIXEL_M,
                 truth: Some(truth),
                 prior,
+                job: FrameJob::Locate,
+                truth_offset_m: None,
             },
             heights_m: heights,
         });
@@ -382,6 +406,8 @@ pub fn generate_set(terrain_frames: usize) -> Result<FrameSet> {
                 pixel_m: FRAME_PIXEL_M,
                 truth: Some(truth),
                 prior: Some(prior),
+                job: FrameJob::Locate,
+                truth_offset_m: None,
             },
             heights_m: heights,
         });
@@ -424,11 +450,194 @@ pub fn generate_set(terrain_frames: usize) -> Result<FrameSet> {
                 pixel_m: FRAME_PIXEL_M,
                 truth: None,
                 prior,
+                job: FrameJob::Locate,
+                truth_offset_m: None,
             },
             heights_m: stress(kind, 77 + i as u64),
         });
     }
+    final_phase_frames(&dem, &mut frames)?;
     Ok(FrameSet { tile, frames })
+}
+
+/// Seed of the final phase's landing zone and frame noise.
+pub const FINAL_PHASE_SEED: u64 = 18;
+
+/// The final phase of a descent as the target sees it: keyframes and odometry frames from 4 m
+/// down to 0.6 m pixels, the hazard map on a 0.4 m frame, and the worst cases of odometry and of
+/// the map. Frames come from the descent's own sensor model ([`SensorModel::default`]: range
+/// noise shrinking with range, dropouts) over the HIL terrain with a landing zone (rocks and
+/// small craters, [`LandingZoneConfig::default`]) at its centre.
+fn final_phase_frames(dem: &Dem, frames: &mut Vec<Frame>) -> Result<()> {
+    let (x0, y0, x1, y1) = dem.extent_m();
+    let centre = [(x0 + x1) / 2.0, (y0 + y1) / 2.0];
+    let zone = landing_zone(dem, centre, &LandingZoneConfig::default(), FINAL_PHASE_SEED)
+        .map_err(|e| anyhow::anyhow!("landing zone: {e}"))?;
+    let terrain = Terrain {
+        map: dem,
+        zone: Some(&zone),
+    };
+    let sensor = SensorModel::default();
+    let side = FRAME_SIDE as f32;
+    // The filter's state as the descent hands it over: heading known to ~0.3° (1σ 0.5°), the
+    // pixel to 1e-3, the displacement predicted about 1σ off with σ 4 m.
+    let heading_err = 0.3f64.to_radians();
+    let heading_sigma = 0.5f64.to_radians();
+    let rel_sigma = 1e-3;
+    // (name, kind, pixel m, frame centre from the landing-zone centre [east, north] m, heading
+    // deg)
+    let plan: [(&str, FrameKind, f64, [f64; 2], f64); 9] = [
+        (
+            "final-key-4.0m",
+            FrameKind::Keyframe,
+            4.0,
+            [-60.0, 40.0],
+            20.0,
+        ),
+        (
+            "final-odo-2.6m",
+            FrameKind::Odometry,
+            2.6,
+            [-25.0, 18.0],
+            21.5,
+        ),
+        (
+            "final-key-1.5m",
+            FrameKind::Keyframe,
+            1.5,
+            [-12.0, 9.0],
+            22.0,
+        ),
+        (
+            "final-odo-1.0m",
+            FrameKind::Odometry,
+            1.0,
+            [-4.0, 3.0],
+            23.0,
+        ),
+        (
+            "final-key-0.6m",
+            FrameKind::Keyframe,
+            0.6,
+            [-1.0, 1.5],
+            23.5,
+        ),
+        (
+            "final-hazard-0.4m",
+            FrameKind::Hazard,
+            0.4,
+            [1.0, -0.5],
+            24.0,
+        ),
+        (
+            "final-odo-0.4m",
+            FrameKind::Odometry,
+            0.4,
+            [2.0, -1.0],
+            24.0,
+        ),
+        (
+            "stress-odometry",
+            FrameKind::StressOdometry,
+            0.4,
+            [2.0, -1.0],
+            24.0,
+        ),
+        (
+            "stress-hazard",
+            FrameKind::StressHazard,
+            0.4,
+            [2.0, -1.0],
+            24.0,
+        ),
+    ];
+    let mut key: Option<FramePose> = None;
+    for (k, (name, kind, pixel_m, off, heading_deg)) in plan.into_iter().enumerate() {
+        let pose = FramePose {
+            x_m: centre[0] + off[0],
+            y_m: centre[1] + off[1],
+            heading_rad: heading_deg.to_radians(),
+            pixel_m,
+        };
+        let mut heights = synth_frame_on(&terrain, &pose, &sensor, FINAL_PHASE_SEED + k as u64)
+            .map_err(|e| anyhow::anyhow!("{name}: {e}"))?
+            .heights_m;
+        let mut truth_offset_m = None;
+        let job = match kind {
+            FrameKind::Keyframe => {
+                key = Some(pose);
+                FrameJob::Keyframe(WireKeyframePose {
+                    heading_rad: pose.heading_rad + heading_err,
+                    heading_sigma_rad: heading_sigma,
+                    pixel_rel_sigma: rel_sigma,
+                })
+            }
+            FrameKind::Hazard | FrameKind::StressHazard => {
+                // The target 10 m right of and 6 m below the frame centre (frame axes), the aim
+                // still on it: the map keeps it or moves it.
+                let target = [side / 2.0 + 25.0, side / 2.0 + 15.0];
+                if kind == FrameKind::StressHazard {
+                    // Gentle swell a few centimetres high, every footprint read in full, and one
+                    // 0.8 m boulder on the aim: the choice then scans the whole lattice.
+                    let tex = stress(FrameKind::Textured, 93);
+                    heights = tex.iter().map(|&t| t * 0.001).collect();
+                    for (i, h) in heights.iter_mut().enumerate() {
+                        let (x, y) = ((i % FRAME_SIDE) as f32, (i / FRAME_SIDE) as f32);
+                        if (x - target[0]).hypot(y - target[1]) < 2.5 {
+                            *h += 0.8;
+                        }
+                    }
+                }
+                FrameJob::Hazard(WireAim {
+                    aim_px: target,
+                    target_px: target,
+                })
+            }
+            _ => {
+                let Some(kp) = key else {
+                    bail!("{name}: an odometry frame before any keyframe");
+                };
+                let truth = [pose.x_m - kp.x_m, pose.y_m - kp.y_m];
+                let is_stress = kind == FrameKind::StressOdometry;
+                if is_stress {
+                    // Relief a few decimetres over 2–40 m: texture the matcher cannot place.
+                    let tex = stress(FrameKind::Textured, 91);
+                    heights = tex.iter().map(|&t| t * 0.02).collect();
+                } else {
+                    truth_offset_m = Some(truth);
+                }
+                // A fixed error of about one σ, not drawn: the recorded set stays the same.
+                let sigma_m: f64 = if is_stress { 12.0 } else { 4.0 };
+                FrameJob::Odometry(WireOdometryPrior {
+                    offset_m: [truth[0] + 0.8 * sigma_m, truth[1] - 0.6 * sigma_m],
+                    offset_cov_m2: [sigma_m * sigma_m, 0.0, 0.0, sigma_m * sigma_m],
+                    heading_rad: pose.heading_rad - heading_err,
+                    heading_sigma_rad: if is_stress {
+                        6.0f64.to_radians()
+                    } else {
+                        heading_sigma
+                    },
+                    pixel_rel_sigma: if is_stress { 0.03 } else { rel_sigma },
+                })
+            }
+        };
+        frames.push(Frame {
+            meta: FrameMeta {
+                id: frames.len() as u32,
+                name: name.into(),
+                kind,
+                width: FRAME_SIDE as u16,
+                height: FRAME_SIDE as u16,
+                pixel_m: pixel_m as f32,
+                truth: None,
+                prior: None,
+                job,
+                truth_offset_m,
+            },
+            heights_m: heights,
+        });
+    }
+    Ok(())
 }
 
 impl FrameSet {

@@ -5,14 +5,15 @@
 use super::frames::{Frame, FrameSet};
 use super::link::{Fault, HostCounters, HostLink, Incoming, spawn_reader};
 use crate::convert;
+use crate::job::FinalPhase;
 use crate::msg::{
-    FrameChunk, FrameCost, FrameHeader, FrameResult, Hello, Message, SampleFormat, Status,
-    WireOutcome,
+    FrameChunk, FrameCost, FrameHeader, FrameJob, FrameResult, Hello, Message, SampleFormat,
+    Status, WireAimDecision, WireHazard, WireOutcome,
 };
 use crate::packet::MAX_CHUNK_BYTES;
 use crate::target::payload_crc;
 use anyhow::{Context, Result, bail};
-use nav_core::{DemPatch, NavConfig, NavError, Navigator, Tile};
+use nav_core::{NavConfig, Navigator, Tile};
 use object::{Object, ObjectSection, ObjectSymbol};
 use serde::Serialize;
 use std::fs;
@@ -32,7 +33,8 @@ pub use crate::flight::Workspace;
 pub struct RunOptions {
     /// Repository root.
     pub root: PathBuf,
-    /// Use at most this many frames of the set (stress frames are always kept at the end).
+    /// Use at most this many TRN frames of the set (stress frames are always kept at the end);
+    /// the final-phase chain runs whole in any case.
     pub frames: Option<usize>,
     /// QEMU machine: `mps2-an386` (Cortex-M4) or `mps2-an500` (Cortex-M7).
     pub machine: String,
@@ -102,6 +104,19 @@ pub struct FrameRecord {
     pub heading_error_deg: Option<f64>,
     /// Link fault injected into this frame's packets, if any.
     pub fault: Option<Fault>,
+    /// The job: `locate`, `keyframe`, `odometry` or `hazard`.
+    pub job: String,
+    /// Odometry: error of the displacement against the truth, metres.
+    pub offset_error_m: Option<f64>,
+    /// Odometry: the displacement's 1σ (largest axis), metres.
+    pub offset_sigma_m: Option<f64>,
+    /// Hazard map: sites judged and the safe fraction.
+    pub hazard_sites: Option<u32>,
+    /// Hazard map: fraction of the sites judged safe.
+    pub hazard_safe_frac: Option<f64>,
+    /// Hazard map: the aim's distance from the target after the decision, metres (0: the aim
+    /// on the target was kept; null: no site within reach).
+    pub site_from_target_m: Option<f32>,
 }
 
 /// The run's report (written as JSON).
@@ -334,19 +349,18 @@ pub fn qemu_command(
     c
 }
 
-/// The host's own result for a frame, through the same wire conversion.
-pub fn host_result(nav: &Navigator<'_>, ws: &mut Workspace, f: &Frame) -> FrameResult {
-    let prior = f.meta.prior.as_ref().map(convert::prior);
-    let r = match DemPatch::new_checked(
-        &f.heights_m,
-        f.meta.width as usize,
-        f.meta.height as usize,
-        f.meta.pixel_m,
-    ) {
-        Ok(d) => nav.locate_dem(ws, &d, prior.as_ref()),
-        Err(e) => Err(NavError::Frame(e)),
-    };
-    convert::frame_result(f.meta.id, &r)
+/// The host's own result for a frame: the same job function ([`crate::job::execute`]) on the
+/// host's own final-phase state `fp`, through the same wire conversion.
+pub fn host_result(
+    nav: &Navigator<'_>,
+    ws: &mut Workspace,
+    fp: &mut FinalPhase,
+    f: &Frame,
+) -> FrameResult {
+    let payload: Vec<u8> = f.heights_m.iter().flat_map(|h| h.to_le_bytes()).collect();
+    let header = frame_header(f, &payload);
+    let out = crate::job::execute(nav, ws, fp, &header, &f.heights_m);
+    convert::job_result(f.meta.id, &out, fp)
 }
 
 fn outcome_name(o: &WireOutcome) -> String {
@@ -354,21 +368,39 @@ fn outcome_name(o: &WireOutcome) -> String {
         WireOutcome::Fix(_) => "fix".into(),
         WireOutcome::NoFix(n) => format!("no_fix:{n:?}"),
         WireOutcome::Refused(e) => format!("refused:{e:?}"),
+        WireOutcome::Keyframe(_) => "keyframe".into(),
+        WireOutcome::Hazard => "hazard_map".into(),
     }
 }
 
-/// Pick the frames to run: the first `n − stress` terrain frames and every stress frame.
+fn job_name(f: &Frame) -> String {
+    match f.meta.job {
+        FrameJob::Locate => "locate",
+        FrameJob::Keyframe(_) => "keyframe",
+        FrameJob::Odometry(_) => "odometry",
+        FrameJob::Hazard(_) => "hazard",
+    }
+    .into()
+}
+
+/// Pick the frames to run: of the TRN frames, the first `n − stress` terrain frames and (up to
+/// `n`) the stress frames; the final-phase chain (keyframes, odometry, hazard map) always runs
+/// whole, after them, since each of its frames needs the keyframe before it.
 fn select(set: &FrameSet, n: Option<usize>) -> Vec<&Frame> {
     let all: Vec<&Frame> = set.frames.iter().collect();
     let Some(n) = n else { return all };
+    let (trn, final_phase): (Vec<&Frame>, Vec<&Frame>) = all
+        .into_iter()
+        .partition(|f| matches!(f.meta.job, FrameJob::Locate));
     let (stress, terrain): (Vec<&Frame>, Vec<&Frame>) =
-        all.into_iter().partition(|f| f.meta.truth.is_none());
+        trn.into_iter().partition(|f| f.meta.truth.is_none());
     let keep_stress = stress.len().min(n);
     let keep_terrain = n - keep_stress;
     terrain
         .into_iter()
         .take(keep_terrain)
         .chain(stress.into_iter().take(keep_stress))
+        .chain(final_phase)
         .collect()
 }
 
@@ -415,6 +447,7 @@ pub fn frame_header(f: &Frame, payload: &[u8]) -> FrameHeader {
         payload_bytes: payload.len() as u32,
         payload_crc: payload_crc(payload),
         prior: f.meta.prior,
+        job: f.meta.job,
     }
 }
 
@@ -445,6 +478,7 @@ pub fn run(opts: &RunOptions) -> Result<Report> {
     let tile = Tile::parse(&set.tile).map_err(|e| anyhow::anyhow!("tile: {e}"))?;
     let nav = Navigator::new(tile, NavConfig::default());
     let mut ws: Box<Workspace> = Box::new(Workspace::new());
+    let mut fp: Box<FinalPhase> = Box::default();
 
     let session_dir = opts
         .work_dir()
@@ -599,10 +633,18 @@ pub fn run(opts: &RunOptions) -> Result<Report> {
             )?;
         }
         let id = f.meta.id;
-        let got = match link.wait_for(Duration::from_secs(300), |m| {
-            matches!(m, Message::FrameResult(r) if r.frame_id == id)
-                || matches!(m, Message::Error(e) if e.frame_id == id)
-        })? {
+        let got = match link
+            .wait_for(Duration::from_secs(300), |m| {
+                matches!(m, Message::FrameResult(r) if r.frame_id == id)
+                    || matches!(m, Message::Error(e) if e.frame_id == id)
+            })
+            .with_context(|| {
+                format!(
+                    "frame {id} ({}): QEMU said:\n{}",
+                    f.meta.name,
+                    fs::read_to_string(&qemu_log).unwrap_or_default()
+                )
+            })? {
             Message::FrameResult(r) => r,
             other => bail!("frame {id}: the target answered {other:?}"),
         };
@@ -614,7 +656,7 @@ pub fn run(opts: &RunOptions) -> Result<Report> {
             _ => bail!("frame {id}: no cost"),
         };
         costs.push((id, cost));
-        let host = host_result(&nav, &mut ws, f);
+        let host = host_result(&nav, &mut ws, &mut fp, f);
         let bit_exact = postcard::to_stdvec(&host)? == postcard::to_stdvec(&got)?;
         let (pos_err, head_err) = match (&got.outcome, &f.meta.truth) {
             (WireOutcome::Fix(fx), Some(t)) => {
@@ -629,6 +671,26 @@ pub fn run(opts: &RunOptions) -> Result<Report> {
                 )
             }
             _ => (None, None),
+        };
+        let (offset_error_m, offset_sigma_m) = match (&got.offset, &f.meta.truth_offset_m) {
+            (Some(o), Some(t)) => (
+                Some((o.east_m - t[0]).hypot(o.north_m - t[1])),
+                Some(o.cov_m2[0].max(o.cov_m2[3]).sqrt()),
+            ),
+            (Some(o), None) => (None, Some(o.cov_m2[0].max(o.cov_m2[3]).sqrt())),
+            _ => (None, None),
+        };
+        let (hazard_sites, hazard_safe_frac, site_from_target_m) = match &got.hazard {
+            Some(WireHazard::Map(st, decision)) => (
+                Some(st.sites),
+                Some(st.safe as f64 / st.sites.max(1) as f64),
+                match decision {
+                    WireAimDecision::Move(x) => Some(x.from_target_m),
+                    WireAimDecision::Keep(_) => Some(0.0),
+                    WireAimDecision::NoSite => None,
+                },
+            ),
+            _ => (None, None, None),
         };
         let inliers = match &got.outcome {
             WireOutcome::Fix(fx) => fx.inliers,
@@ -649,11 +711,31 @@ pub fn run(opts: &RunOptions) -> Result<Report> {
             position_error_px: pos_err,
             heading_error_deg: head_err,
             fault,
+            job: job_name(f),
+            offset_error_m,
+            offset_sigma_m,
+            hazard_sites,
+            hazard_safe_frac,
+            site_from_target_m,
         });
+        let mut extra = String::new();
+        if let Some(e) = offset_error_m {
+            extra.push_str(&format!(
+                "  offset err {e:.2} m (σ {:.2})",
+                offset_sigma_m.unwrap_or(f64::NAN)
+            ));
+        }
+        if let (Some(n), Some(fr)) = (hazard_sites, hazard_safe_frac) {
+            extra.push_str(&format!(
+                "  hazard {n} sites, {:.1} % safe, site {}",
+                100.0 * fr,
+                site_from_target_m.map_or("none".into(), |d| format!("{d:.1} m off"))
+            ));
+        }
         say(
             opts.progress,
             format!(
-                "[{:>2}/{}] {:<26} {:<28} feats {:>3} inliers {:>3} {:>6.2} s{}{}",
+                "[{:>2}/{}] {:<26} {:<28} feats {:>3} inliers {:>3} {:>6.2} s{}{}{}",
                 k + 1,
                 frames.len(),
                 f.meta.name,
@@ -661,6 +743,7 @@ pub fn run(opts: &RunOptions) -> Result<Report> {
                 got.features,
                 inliers,
                 t0.elapsed().as_secs_f64(),
+                extra,
                 if bit_exact {
                     "  bit-exact"
                 } else {

@@ -1,0 +1,318 @@
+//! `ground-sim hazard-calibrate`: how often the onboard hazard map calls a site safe that the
+//! truth DEM calls unsafe, for a range of the map's relief thresholds.
+//!
+//! For each preset and seed: a coarse scene (2 km at 10 m), a landing zone at its centre (rocks,
+//! small craters, sub-metre roughness: [`landing_zone`]), frames of the descent's sensor at the
+//! hazard map's pixel ([`SensorModel::default`], noise and dropouts included) at random places
+//! and headings in the zone, the flight hazard map ([`HazardMap::build`]) with each relief
+//! threshold, and every site it judges scored with the truth ([`site_safety`], the lander's
+//! 10° and 0.3 m). Sites with room around them (the clearance guidance asks for) are counted
+//! apart: they are the ones a lander is sent to.
+//!
+//! Writes a table to stdout and the figures as JSON.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::Context;
+use ground_sim::dem::Dem;
+use ground_sim::flyer::frames::{FramePose, SensorModel, Terrain, synth_frame_on};
+use ground_sim::terrain::landing::{
+    LandingZoneConfig, SafetyThresholds, landing_zone, site_safety,
+};
+use ground_sim::terrain::{Preset, TerrainParams, Window, generate};
+use nav_core::hazard::HazardConfig;
+use rand::{RngExt, SeedableRng};
+use rayon::prelude::*;
+use serde::Serialize;
+
+/// Arguments of `ground-sim hazard-calibrate`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// Presets of the coarse scenes.
+    #[arg(long, value_enum, value_delimiter = ',', default_values_t = [Preset::Lola, Preset::Shoemaker, Preset::Plains])]
+    pub presets: Vec<Preset>,
+    /// First seed (scene, zone and frames); seeds `seed .. seed + zones` are used.
+    #[arg(long, default_value_t = 101)]
+    pub seed: u64,
+    /// Landing zones per preset.
+    #[arg(long, default_value_t = 6)]
+    pub zones: u64,
+    /// Frames per zone.
+    #[arg(long, default_value_t = 4)]
+    pub frames: usize,
+    /// Frame pixel, metres (the descent maps at 0.4 m).
+    #[arg(long, default_value_t = 0.4)]
+    pub pixel_m: f64,
+    /// Relief thresholds of the map to try, metres.
+    #[arg(long, value_delimiter = ',', default_values_t = [0.30, 0.25, 0.20, 0.15])]
+    pub relief_m: Vec<f32>,
+    /// Figures as JSON.
+    #[arg(long)]
+    pub json: PathBuf,
+}
+
+/// Counts for one relief threshold.
+#[derive(Debug, Clone, Copy, Default, Serialize)]
+pub struct Counts {
+    /// Sites judged by the map and by the truth.
+    pub sites: usize,
+    /// Sites the truth calls safe.
+    pub truth_safe: usize,
+    /// Sites the map calls safe.
+    pub judged_safe: usize,
+    /// Of those, unsafe by the truth (misses).
+    pub missed: usize,
+    /// Sites the map calls safe with at least the guidance's 2 m of clearance.
+    pub judged_safe_2m: usize,
+    /// Of those, unsafe by the truth.
+    pub missed_2m: usize,
+    /// Sites with the preferred 4 m of clearance.
+    pub judged_safe_4m: usize,
+    /// Of those, unsafe by the truth.
+    pub missed_4m: usize,
+}
+
+impl Counts {
+    fn add(&mut self, o: &Counts) {
+        self.sites += o.sites;
+        self.truth_safe += o.truth_safe;
+        self.judged_safe += o.judged_safe;
+        self.missed += o.missed;
+        self.judged_safe_2m += o.judged_safe_2m;
+        self.missed_2m += o.missed_2m;
+        self.judged_safe_4m += o.judged_safe_4m;
+        self.missed_4m += o.missed_4m;
+    }
+}
+
+/// One row of the result: a preset (or all) and a threshold.
+#[derive(Debug, Serialize)]
+struct Row {
+    preset: String,
+    relief_m: f32,
+    counts: Counts,
+    /// `missed / judged_safe`.
+    miss_rate: f64,
+    /// `missed_2m / judged_safe_2m`.
+    miss_rate_2m: f64,
+    /// `missed_4m / judged_safe_4m`.
+    miss_rate_4m: f64,
+    /// `judged_safe / truth_safe`: how much of the truly safe ground the map still offers.
+    offered: f64,
+}
+
+#[derive(Debug, Serialize)]
+struct Report {
+    presets: Vec<String>,
+    seeds: (u64, u64),
+    frames_per_zone: usize,
+    pixel_m: f64,
+    sensor: SensorModel,
+    landing_zone: LandingZoneConfig,
+    truth_thresholds: SafetyThresholds,
+    map_slope_deg: f32,
+    rows: Vec<Row>,
+    seconds: f64,
+}
+
+/// Score every site of the maps of one zone, for every threshold.
+fn zone_counts(preset: Preset, seed: u64, a: &Args) -> anyhow::Result<Vec<Counts>> {
+    let params = TerrainParams {
+        preset,
+        window: Window::Floor,
+        seed,
+        size_m: 2000.0,
+        pixel_m: 10.0,
+    };
+    let (map, _) = generate(&params, &indicatif::ProgressBar::hidden())
+        .map_err(|e| anyhow::anyhow!("scene: {e}"))?;
+    let (x0, y0, x1, y1) = map.extent_m();
+    let centre = [(x0 + x1) / 2.0, (y0 + y1) / 2.0];
+    let zone: Dem = landing_zone(&map, centre, &LandingZoneConfig::default(), seed)
+        .map_err(|e| anyhow::anyhow!("landing zone: {e}"))?;
+    let terrain = Terrain {
+        map: &map,
+        zone: Some(&zone),
+    };
+    let sensor = SensorModel::default();
+    let truth = SafetyThresholds::default();
+    let mut rng = rand_pcg::Pcg64::seed_from_u64(seed ^ 0x4A2A_D0C5);
+    let mut out = vec![Counts::default(); a.relief_m.len()];
+    let mut hazards = Box::new(nav_core::flight::HazardMap::new());
+    for _ in 0..a.frames {
+        // Anywhere the frame stays inside the zone's untapered part.
+        let pose = FramePose {
+            x_m: centre[0] + (rng.random::<f64>() - 0.5) * 300.0,
+            y_m: centre[1] + (rng.random::<f64>() - 0.5) * 300.0,
+            heading_rad: rng.random::<f64>() * std::f64::consts::TAU,
+            pixel_m: a.pixel_m,
+        };
+        let frame = synth_frame_on(&terrain, &pose, &sensor, rng.random::<u64>())
+            .map_err(|e| anyhow::anyhow!("frame: {e}"))?;
+        let dem = nav_core::DemPatch::new_checked(
+            &frame.heights_m,
+            frame.width,
+            frame.height,
+            a.pixel_m as f32,
+        )?;
+        // The truth of every lattice site (the lattice is the same for every threshold).
+        let mut verdicts = Vec::new();
+        for (k, &relief) in a.relief_m.iter().enumerate() {
+            let cfg = HazardConfig {
+                max_relief_m: relief,
+                ..HazardConfig::default()
+            };
+            hazards
+                .build(&dem, &cfg)
+                .map_err(|e| anyhow::anyhow!("hazard map: {e}"))?;
+            let (cols, rows) = hazards.size();
+            if verdicts.is_empty() {
+                for j in 0..rows {
+                    for i in 0..cols {
+                        let p = hazards.site_px(i, j);
+                        let (x, y) =
+                            pose.frame_to_geo(p[0] as f64, p[1] as f64, frame.width, frame.height);
+                        verdicts.push(site_safety(&zone, x, y, &truth).map(|s| s.safe));
+                    }
+                }
+            }
+            let c = &mut out[k];
+            for j in 0..rows {
+                for i in 0..cols {
+                    let Some(Some(safe)) = verdicts.get(j * cols + i).copied() else {
+                        continue;
+                    };
+                    let clear = hazards.clearance_m(i, j);
+                    c.sites += 1;
+                    c.truth_safe += usize::from(safe);
+                    if clear > 0.0 {
+                        c.judged_safe += 1;
+                        c.missed += usize::from(!safe);
+                    }
+                    if clear >= cfg.clearance_m {
+                        c.judged_safe_2m += 1;
+                        c.missed_2m += usize::from(!safe);
+                    }
+                    if clear >= cfg.preferred_clearance_m {
+                        c.judged_safe_4m += 1;
+                        c.missed_4m += usize::from(!safe);
+                    }
+                }
+            }
+        }
+    }
+    Ok(out)
+}
+
+fn ratio(a: usize, b: usize) -> f64 {
+    if b == 0 {
+        f64::NAN
+    } else {
+        a as f64 / b as f64
+    }
+}
+
+/// Run `ground-sim hazard-calibrate`.
+pub fn run(a: &Args) -> anyhow::Result<()> {
+    anyhow::ensure!(!a.presets.is_empty(), "--presets: give at least one preset");
+    anyhow::ensure!(
+        a.zones > 0 && a.frames > 0,
+        "--zones and --frames must be positive"
+    );
+    anyhow::ensure!(
+        a.relief_m.iter().all(|r| r.is_finite() && *r > 0.0),
+        "--relief-m: thresholds must be finite and positive"
+    );
+    anyhow::ensure!(
+        a.pixel_m.is_finite() && a.pixel_m > 0.0,
+        "--pixel-m must be finite and positive"
+    );
+    let t0 = Instant::now();
+    let jobs: Vec<(Preset, u64)> = a
+        .presets
+        .iter()
+        .flat_map(|&p| (a.seed..a.seed + a.zones).map(move |s| (p, s)))
+        .collect();
+    let bar = indicatif::ProgressBar::new(jobs.len() as u64).with_message("landing zones");
+    let per_zone: Vec<(Preset, Vec<Counts>)> = jobs
+        .par_iter()
+        .map(|&(p, s)| {
+            let r = zone_counts(p, s, a).with_context(|| format!("{p:?} seed {s}"));
+            bar.inc(1);
+            r.map(|c| (p, c))
+        })
+        .collect::<anyhow::Result<_>>()?;
+    bar.finish_and_clear();
+    let mut rows = Vec::new();
+    let name = |p: Preset| format!("{p:?}").to_lowercase();
+    let groups: Vec<Option<Preset>> = a
+        .presets
+        .iter()
+        .copied()
+        .map(Some)
+        .chain(std::iter::once(None))
+        .collect();
+    for g in groups {
+        for (k, &relief) in a.relief_m.iter().enumerate() {
+            let mut c = Counts::default();
+            for (p, counts) in &per_zone {
+                if g.is_none_or(|g| g == *p) {
+                    c.add(&counts[k]);
+                }
+            }
+            rows.push(Row {
+                preset: g.map_or("all".into(), name),
+                relief_m: relief,
+                counts: c,
+                miss_rate: ratio(c.missed, c.judged_safe),
+                miss_rate_2m: ratio(c.missed_2m, c.judged_safe_2m),
+                miss_rate_4m: ratio(c.missed_4m, c.judged_safe_4m),
+                offered: ratio(c.judged_safe, c.truth_safe),
+            });
+        }
+    }
+    println!(
+        "map relief threshold vs truth (lander 10°, 0.3 m), {} zones × {} frames at {} m per preset, seeds {}..{}",
+        a.zones,
+        a.frames,
+        a.pixel_m,
+        a.seed,
+        a.seed + a.zones - 1
+    );
+    println!(
+        "{:<10} {:>7} {:>9} {:>11} {:>11} {:>11} {:>11}",
+        "preset", "relief", "sites", "miss", "miss ≥2 m", "miss ≥4 m", "offered"
+    );
+    for r in &rows {
+        println!(
+            "{:<10} {:>5.2} m {:>9} {:>10.2}% {:>10.2}% {:>10.2}% {:>10.1}%",
+            r.preset,
+            r.relief_m,
+            r.counts.sites,
+            100.0 * r.miss_rate,
+            100.0 * r.miss_rate_2m,
+            100.0 * r.miss_rate_4m,
+            100.0 * r.offered
+        );
+    }
+    let report = Report {
+        presets: a.presets.iter().map(|&p| name(p)).collect(),
+        seeds: (a.seed, a.seed + a.zones - 1),
+        frames_per_zone: a.frames,
+        pixel_m: a.pixel_m,
+        sensor: SensorModel::default(),
+        landing_zone: LandingZoneConfig::default(),
+        truth_thresholds: SafetyThresholds::default(),
+        map_slope_deg: HazardConfig::default().max_slope_deg,
+        rows,
+        seconds: t0.elapsed().as_secs_f64(),
+    };
+    if let Some(dir) = a.json.parent() {
+        std::fs::create_dir_all(dir)?;
+    }
+    std::fs::write(&a.json, serde_json::to_string_pretty(&report)?)
+        .with_context(|| a.json.display().to_string())?;
+    eprintln!("wrote {} ({:.1} s)", a.json.display(), report.seconds);
+    Ok(())
+}

@@ -1,0 +1,49 @@
+//! `ground-sim hazard-calibrate`: the map's misses against the truth, per relief threshold.
+
+// Test helpers outside #[test] functions may unwrap too: a failure is a test failure.
+#![allow(clippy::unwrap_used)]
+
+use std::process::Command;
+
+#[test]
+fn a_stricter_map_offers_less_ground_and_misses_no_more() {
+    let dir = tempfile::tempdir().unwrap();
+    let json = dir.path().join("calib.json");
+    let out = Command::new(env!("CARGO_BIN_EXE_ground-sim"))
+        .args(["hazard-calibrate", "--presets", "plains", "--zones", "1"])
+        .args(["--frames", "1", "--relief-m", "0.3,0.2,0.1", "--json"])
+        .arg(&json)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let rows: Vec<&serde_json::Value> = v["rows"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|r| r["preset"] == "plains")
+        .collect();
+    assert_eq!(rows.len(), 3);
+    let n = |r: &serde_json::Value, k: &str| r["counts"][k].as_u64().unwrap();
+    for w in rows.windows(2) {
+        // The same frame and truth: a lower threshold judges a subset of the sites safe.
+        assert_eq!(n(w[0], "sites"), n(w[1], "sites"));
+        assert!(n(w[0], "sites") > 1000);
+        assert!(n(w[1], "judged_safe") <= n(w[0], "judged_safe"));
+        assert!(n(w[1], "missed") <= n(w[0], "missed"));
+    }
+    // The 0.4 m frame under-reads rocks: a map judging with the lander's own 0.3 m misses some.
+    assert!(n(rows[0], "missed") > 0, "{:?}", rows[0]);
+    let bad = Command::new(env!("CARGO_BIN_EXE_ground-sim"))
+        .args(["hazard-calibrate", "--relief-m", "0", "--json"])
+        .arg(&json)
+        .output()
+        .unwrap();
+    assert!(!bad.status.success());
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("finite and positive"));
+}
