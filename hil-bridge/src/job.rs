@@ -5,8 +5,8 @@
 //! A frame is one of: TRN on the reference tile ([`FrameJob::Locate`]), a keyframe capture
 //! ([`FrameJob::Keyframe`]), odometry on the held keyframe ([`FrameJob::Odometry`]) or the hazard
 //! map and its decision for the aim ([`FrameJob::Hazard`]). One job per frame keeps every frame
-//! within the instruction budget: a keyframe capture (≈ 15 M) and a hazard map (≈ 7 M) together
-//! would not be. The keyframe and the hazard map persist between frames in [`FinalPhase`].
+//! within the instruction budget: a keyframe capture (≈ 13.7 M) and a hazard map (7–15 M)
+//! together would not be. The keyframe and the hazard map persist between frames in [`FinalPhase`].
 
 use crate::flight::{HazardMap, Keyframe, Workspace};
 use crate::msg::{FrameHeader, FrameJob};

@@ -68,8 +68,8 @@ impl Default for HazardConfig {
             // map judges with a margin. The relief margin is measured (`ground-sim
             // hazard-calibrate`, lola/shoemaker/plains zones, seeds 101–106, 0.4 m frames): of
             // the sites judged safe with 2 m of clearance, 5.7 % are truly unsafe at 0.25 m,
-            // 2.3 % at 0.20 m, 0.7 % at 0.17 m (which still offers 44 % of the truly safe
-            // ground; 0.15 m: 0.4 %, 34 %).
+            // 2.3 % at 0.20 m, 0.7 % at 0.17 m (which still offers 43 % of the truly safe
+            // ground; 0.15 m: 0.4 %, 33 %).
             max_slope_deg: 8.0,
             max_relief_m: 0.17,
             site_step_m: 1.0,
@@ -476,9 +476,12 @@ impl<const N: usize> HazardMap<N> {
     /// an unsafe one to the best there is ([`Self::choose`]). [`AimDecision::NoSite`] when
     /// nothing within reach qualifies (the aim stays).
     pub fn decide(&self, aim_px: [f32; 2], target_px: [f32; 2], cfg: &HazardConfig) -> AimDecision {
+        if !aim_px.iter().chain(&target_px).all(|v| v.is_finite()) {
+            return AimDecision::NoSite;
+        }
         let (i, j) = self.nearest_site(aim_px);
         let clear = self.clearance_m(i, j);
-        if clear >= cfg.clearance_m {
+        if clear > 0.0 && clear >= cfg.clearance_m {
             return AimDecision::Keep { clearance_m: clear };
         }
         let pick = if clear > 0.0 {
@@ -512,7 +515,8 @@ impl<const N: usize> HazardMap<N> {
                 }
                 let p = self.site_px(i, j);
                 let dist = libm::hypotf(p[0] - target_px[0], p[1] - target_px[1]) * self.pixel_m;
-                if dist > cfg.max_reach_m {
+                // NaN distances (a non-finite target) are out of reach too.
+                if !(dist <= cfg.max_reach_m) {
                     continue;
                 }
                 let better = best.is_none_or(|b| {
@@ -547,7 +551,8 @@ impl<const N: usize> HazardMap<N> {
                 }
                 let p = self.site_px(i, j);
                 let dist = libm::hypotf(p[0] - target_px[0], p[1] - target_px[1]) * self.pixel_m;
-                if dist > cfg.max_reach_m {
+                // NaN distances (a non-finite target) are out of reach too.
+                if !(dist <= cfg.max_reach_m) {
                     continue;
                 }
                 let better = match &best {

@@ -179,4 +179,14 @@ fn the_decision_keeps_a_roomy_aim_and_moves_one_on_a_rock() {
         ..cfg
     };
     assert_eq!(map.decide(on_rock, on_rock, &short), AimDecision::NoSite);
+    // A non-finite aim or target decides nothing (it arrives over a link on the target).
+    assert_eq!(
+        map.decide([f32::NAN, 1.0], on_rock, &cfg),
+        AimDecision::NoSite
+    );
+    assert_eq!(
+        map.decide(clear, [f32::INFINITY, 0.0], &cfg),
+        AimDecision::NoSite
+    );
+    assert_eq!(map.nearest_with([f32::NAN; 2], 0.0, &cfg), None);
 }

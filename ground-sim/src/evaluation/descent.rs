@@ -532,6 +532,8 @@ pub fn fly(
     // every frame moved the aim 7 times in 8 maps and landed no safer), and each map costs the
     // frame's odometry.
     let mut site_chosen = false;
+    // The frame after a map without a site rests from mapping.
+    let mut map_rest = false;
     let mut final_nees_sum = 0.0;
     // The truth position of the keyframe, to score offsets (never seen by the flyer).
     let mut key_truth = [0.0f64; 2];
@@ -703,12 +705,16 @@ pub fn fly(
                 let input = (&frame.heights_m[..], frame.width, frame.height, pixel_m);
                 let yaw_sigma = filt.yaw_sigma_rad();
                 // A frame does one job, as on the flight target: a hazard map (≈ 7–15 M
-                // instructions) beside a keyframe capture (≈ 14 M) would break the 20 M budget
+                // instructions) beside a keyframe capture (≈ 13.7 M) would break the 20 M budget
                 // (docs/bounds.md), so the map's frame gives up its odometry.
-                let map_due = cfg.hazard_avoidance
+                let map_window = cfg.hazard_avoidance
                     && !site_chosen
                     && pixel_m <= cfg.hazard_max_pixel_m
                     && agl >= cfg.hazard_min_agl_m;
+                // After a map that found no site, the next frame goes to odometry: retrying on
+                // every frame would leave the filter unaided down to the last map's height.
+                let map_due = map_window && !map_rest;
+                map_rest = false;
                 if !cfg.odometry || map_due {
                     // Frames for the hazard map only.
                 } else if key.needs_refresh(pixel_m) || odo_misses >= cfg.odometry_max_misses {
@@ -815,7 +821,10 @@ pub fn fly(
                                 out.site_changes += 1;
                                 site_chosen = true;
                             }
-                            AimDecision::NoSite => out.hazard_no_site += 1,
+                            AimDecision::NoSite => {
+                                out.hazard_no_site += 1;
+                                map_rest = true;
+                            }
                         }
                         if keep_history {
                             last_hazard = Some(HazardPicture {
