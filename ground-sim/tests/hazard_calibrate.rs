@@ -37,6 +37,9 @@ fn a_stricter_map_offers_less_ground_and_misses_no_more() {
         assert!(n(w[1], "judged_safe") <= n(w[0], "judged_safe"));
         assert!(n(w[1], "missed") <= n(w[0], "missed"));
     }
+    // The trade-off picture lands beside the JSON.
+    let png = image::open(json.with_extension("png")).unwrap();
+    assert!(png.width() >= 800 && png.height() >= 400);
     // The 0.4 m frame under-reads rocks: a map judging with the lander's own 0.3 m misses some.
     assert!(n(rows[0], "missed") > 0, "{:?}", rows[0]);
     let bad = Command::new(env!("CARGO_BIN_EXE_ground-sim"))

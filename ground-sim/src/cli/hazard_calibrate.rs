@@ -9,7 +9,7 @@
 //! 10° and 0.3 m). Sites with room around them (the clearance guidance asks for) are counted
 //! apart: they are the ones a lander is sent to.
 //!
-//! Writes a table to stdout and the figures as JSON.
+//! Writes a table to stdout, the figures as JSON and the trade-off as a PNG.
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -17,6 +17,7 @@ use std::time::Instant;
 use anyhow::Context;
 use ground_sim::dem::Dem;
 use ground_sim::flyer::frames::{FramePose, SensorModel, Terrain, synth_frame_on};
+use ground_sim::pictures::plot::{Plot, Series, Style};
 use ground_sim::terrain::landing::{
     LandingZoneConfig, SafetyThresholds, landing_zone, site_safety,
 };
@@ -50,6 +51,10 @@ pub struct Args {
     /// Figures as JSON.
     #[arg(long)]
     pub json: PathBuf,
+    /// Trade-off picture (misses against safe ground refused, one curve per preset); default:
+    /// the JSON's path with `.png`.
+    #[arg(long)]
+    pub png: Option<PathBuf>,
 }
 
 /// Counts for one relief threshold.
@@ -212,6 +217,75 @@ fn zone_counts(preset: Preset, seed: u64, a: &Args) -> anyhow::Result<Vec<Counts
     Ok(out)
 }
 
+/// Misses among the 2 m-clearance sites against the truly safe ground refused, one curve per
+/// preset (and all), each point one threshold (stricter to the right).
+fn picture(rows: &[Row]) -> Plot {
+    let palette = [
+        [31, 119, 180],
+        [255, 127, 14],
+        [44, 160, 44],
+        [214, 39, 40],
+        [148, 103, 189],
+    ];
+    let mut names: Vec<&str> = Vec::new();
+    for r in rows {
+        if !names.contains(&r.preset.as_str()) {
+            names.push(&r.preset);
+        }
+    }
+    let mut series = Vec::new();
+    for (k, name) in names.iter().enumerate() {
+        let mut pts: Vec<(f64, f64, f32)> = rows
+            .iter()
+            .filter(|r| r.preset == *name)
+            .map(|r| {
+                (
+                    100.0 * (1.0 - r.offered),
+                    100.0 * r.miss_rate_2m,
+                    r.relief_m,
+                )
+            })
+            .collect();
+        pts.sort_by(|a, b| b.2.total_cmp(&a.2));
+        let colour = if *name == "all" {
+            [0, 0, 0]
+        } else {
+            palette[k % palette.len()]
+        };
+        let points: Vec<(f64, f64)> = pts.iter().map(|p| (p.0, p.1)).collect();
+        series.push(Series {
+            label: (*name).to_string(),
+            colour,
+            points: points.clone(),
+            style: Style::Line,
+        });
+        series.push(Series {
+            label: String::new(),
+            colour,
+            points,
+            style: Style::Dots(3),
+        });
+    }
+    let all: Vec<String> = rows
+        .iter()
+        .filter(|r| r.preset == "all")
+        .map(|r| format!("{:.2}", r.relief_m))
+        .collect();
+    Plot {
+        width: 1000,
+        height: 560,
+        title: format!(
+            "map relief {} .. {} m, left to right",
+            all.first().map_or("?", |v| v.as_str()),
+            all.last().map_or("?", |v| v.as_str())
+        ),
+        x_label: "truly safe ground the map refuses, %".into(),
+        y_label: "sites with 2 m clearance truly unsafe, %".into(),
+        series,
+        equal_axes: false,
+    }
+}
+
 fn ratio(a: usize, b: usize) -> f64 {
     if b == 0 {
         f64::NAN
@@ -335,6 +409,15 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
     if let Some(dir) = a.json.parent() {
         std::fs::create_dir_all(dir)?;
     }
+    let png = a
+        .png
+        .clone()
+        .unwrap_or_else(|| a.json.with_extension("png"));
+    picture(&report.rows)
+        .render()
+        .save(&png)
+        .with_context(|| png.display().to_string())?;
+    eprintln!("wrote {}", png.display());
     std::fs::write(&a.json, serde_json::to_string_pretty(&report)?)
         .with_context(|| a.json.display().to_string())?;
     eprintln!("wrote {} ({:.1} s)", a.json.display(), report.seconds);

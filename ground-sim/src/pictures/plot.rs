@@ -208,7 +208,8 @@ impl Plot {
         );
         // Legend, top right inside the axes.
         let mut ly = top + 6;
-        for s in &self.series {
+        // Series without a label (e.g. the dots over a line) stay out of the legend.
+        for s in self.series.iter().filter(|s| !s.label.is_empty()) {
             let lx = left + pw - (s.label.len() as u32 + 3) * GLYPH - 6;
             draw_line_segment_mut(
                 &mut img,
