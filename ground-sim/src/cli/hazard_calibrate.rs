@@ -17,7 +17,7 @@ use std::time::Instant;
 use anyhow::Context;
 use ground_sim::dem::Dem;
 use ground_sim::flyer::frames::{FramePose, SensorModel, Terrain, synth_frame_on};
-use ground_sim::pictures::plot::{Plot, Series, Style};
+use ground_sim::pictures::plot::{PALETTE, Plot, Series, Style};
 use ground_sim::terrain::landing::{
     LandingZoneConfig, SafetyThresholds, landing_zone, site_safety,
 };
@@ -220,13 +220,6 @@ fn zone_counts(preset: Preset, seed: u64, a: &Args) -> anyhow::Result<Vec<Counts
 /// Misses among the 2 m-clearance sites against the truly safe ground refused, one curve per
 /// preset (and all), each point one threshold (stricter to the right).
 fn picture(rows: &[Row]) -> Plot {
-    let palette = [
-        [31, 119, 180],
-        [255, 127, 14],
-        [44, 160, 44],
-        [214, 39, 40],
-        [148, 103, 189],
-    ];
     let mut names: Vec<&str> = Vec::new();
     for r in rows {
         if !names.contains(&r.preset.as_str()) {
@@ -250,7 +243,7 @@ fn picture(rows: &[Row]) -> Plot {
         let colour = if *name == "all" {
             [0, 0, 0]
         } else {
-            palette[k % palette.len()]
+            PALETTE[k % PALETTE.len()]
         };
         let points: Vec<(f64, f64)> = pts.iter().map(|p| (p.0, p.1)).collect();
         series.push(Series {

@@ -11,7 +11,7 @@ use ground_sim::evaluation::campaign::PriorSpec;
 use ground_sim::evaluation::navmap::NavmapThresholds;
 use ground_sim::evaluation::suite::{SuiteSpec, TileKind, default_scenes, run_scene};
 use ground_sim::insar::pipeline::LookDirections;
-use ground_sim::pictures::plot::{Plot, Series, Style};
+use ground_sim::pictures::plot::{PALETTE, Plot, Series, Style};
 use ground_sim::sar::{Polarisation, SarConfig};
 use serde::Serialize;
 
@@ -323,16 +323,6 @@ pub fn picture(r: &TradeReport) -> Plot {
         .points
         .iter()
         .any(|p| r.points.first().is_some_and(|q| q.scene != p.scene));
-    let palette = [
-        [31, 119, 180],
-        [255, 127, 14],
-        [44, 160, 44],
-        [214, 39, 40],
-        [148, 103, 189],
-        [140, 86, 75],
-        [227, 119, 194],
-        [127, 127, 127],
-    ];
     let mut labels: Vec<String> = Vec::new();
     for p in &r.points {
         let l = design_label(p, many);
@@ -353,7 +343,7 @@ pub fn picture(r: &TradeReport) -> Plot {
             pts.sort_by(|a, b| a.0.total_cmp(&b.0));
             Series {
                 label: l.clone(),
-                colour: palette[i % palette.len()],
+                colour: PALETTE[i % PALETTE.len()],
                 points: pts,
                 style: Style::Line,
             }

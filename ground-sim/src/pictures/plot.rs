@@ -6,6 +6,18 @@ use imageproc::drawing::{draw_filled_circle_mut, draw_line_segment_mut};
 
 use crate::pictures::render::{GLYPH, draw_text, fmt_tick, ticks};
 
+/// Colours for series that stand side by side (a categorical palette), RGB.
+pub const PALETTE: [[u8; 3]; 8] = [
+    [31, 119, 180],
+    [255, 127, 14],
+    [44, 160, 44],
+    [214, 39, 40],
+    [148, 103, 189],
+    [140, 86, 75],
+    [227, 119, 194],
+    [127, 127, 127],
+];
+
 /// How a series is drawn.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Style {
