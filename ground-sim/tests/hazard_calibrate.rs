@@ -26,7 +26,7 @@ fn a_stricter_map_offers_less_ground_and_misses_no_more() {
         .as_array()
         .unwrap()
         .iter()
-        .filter(|r| r["preset"] == "plains")
+        .filter(|r| r["scene"] == "plains")
         .collect();
     assert_eq!(rows.len(), 3);
     let n = |r: &serde_json::Value, k: &str| r["counts"][k].as_u64().unwrap();
@@ -49,4 +49,43 @@ fn a_stricter_map_offers_less_ground_and_misses_no_more() {
         .unwrap();
     assert!(!bad.status.success());
     assert!(String::from_utf8_lossy(&bad.stderr).contains("finite and positive"));
+}
+
+#[test]
+fn a_real_dem_is_a_scene_of_its_own() {
+    let real = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../shared/data/lola-south-pole-site-5m-256.tif");
+    if !real.exists() {
+        eprintln!(
+            "SKIPPED a_real_dem_is_a_scene_of_its_own: {} is absent (../shared/data)",
+            real.display()
+        );
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let json = dir.path().join("calib.json");
+    let out = Command::new(env!("CARGO_BIN_EXE_ground-sim"))
+        .args(["hazard-calibrate", "--presets", "plains", "--zones", "1"])
+        .args(["--frames", "1", "--relief-m", "0.2", "--dem"])
+        .arg(&real)
+        .arg("--json")
+        .arg(&json)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let scenes: Vec<&str> = v["rows"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|r| r["scene"].as_str().unwrap())
+        .collect();
+    assert_eq!(scenes, ["plains", "lola-south-pole-site-5m-256", "all"]);
+    let real_row = &v["rows"][1]["counts"];
+    assert!(real_row["sites"].as_u64().unwrap() > 1000, "{real_row}");
 }

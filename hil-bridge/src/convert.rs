@@ -87,12 +87,7 @@ pub fn job_result(frame_id: u32, out: &JobOutput, fp: &FinalPhase) -> FrameResul
         JobOutput::Keyframe(Ok(())) => {
             let bytes = fp.keyframe.as_bytes();
             let features = fp.keyframe.tile().map_or(0, |t| t.len());
-            let crc = bytes
-                .len()
-                .checked_sub(4)
-                .and_then(|at| bytes.get(at..))
-                .and_then(|b| b.try_into().ok())
-                .map_or(0, u32::from_le_bytes);
+            let crc = nav_core::tile::stored_crc(bytes).unwrap_or(0);
             let features = features.min(u16::MAX as usize) as u16;
             FrameResult {
                 features,

@@ -472,6 +472,17 @@ impl<'a> Tile<'a> {
     }
 }
 
+/// The CRC-32 a tile blob carries in its last four bytes (little-endian), as written: a digest
+/// of the whole tile. `None` for a blob shorter than four bytes (not checked against the
+/// contents: [`Tile::parse`] does that).
+pub fn stored_crc(bytes: &[u8]) -> Option<u32> {
+    let at = bytes.len().checked_sub(4)?;
+    bytes
+        .get(at..)
+        .and_then(|b| b.try_into().ok())
+        .map(u32::from_le_bytes)
+}
+
 /// Serialise a tile without a slope raster into `out`; returns the number of bytes written.
 /// No allocation: the ground side passes a `Vec` sized with [`tile_len`] (header length is
 /// known after encoding; passing `tile_len(MAX_HEADER_LEN, n)` bytes is always enough).

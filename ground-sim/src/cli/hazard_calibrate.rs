@@ -1,8 +1,8 @@
 //! `ground-sim hazard-calibrate`: how often the onboard hazard map calls a site safe that the
 //! truth DEM calls unsafe, for a range of the map's relief thresholds.
 //!
-//! For each preset and seed: a coarse scene (2 km at 10 m), a landing zone at its centre (rocks,
-//! small craters, sub-metre roughness: [`landing_zone`]), frames of the descent's sensor at the
+//! For each preset and seed: a coarse scene (2 km at 10 m; or a real DEM with `--dem`), a
+//! landing zone on it (rocks, small craters, sub-metre roughness: [`landing_zone`]), frames of the descent's sensor at the
 //! hazard map's pixel ([`SensorModel::default`], noise and dropouts included) at random places
 //! and headings in the zone, the flight hazard map ([`HazardMap::build`]) with each relief
 //! threshold, and every site it judges scored with the truth ([`site_safety`], the lander's
@@ -36,7 +36,7 @@ pub struct Args {
     /// First seed (scene, zone and frames); seeds `seed .. seed + zones` are used.
     #[arg(long, default_value_t = 101)]
     pub seed: u64,
-    /// Landing zones per preset.
+    /// Landing zones per scene.
     #[arg(long, default_value_t = 6)]
     pub zones: u64,
     /// Frames per zone.
@@ -48,10 +48,15 @@ pub struct Args {
     /// Relief thresholds of the map to try, metres.
     #[arg(long, value_delimiter = ',', default_values_t = [0.30, 0.25, 0.20, 0.17, 0.15])]
     pub relief_m: Vec<f32>,
+    /// Also calibrate over this north-up GeoTIFF DEM (e.g. the real LOLA tile in
+    /// `../shared/data`): `--zones` landing zones at seed-drawn places on it, labelled with the
+    /// file's name.
+    #[arg(long)]
+    pub dem: Option<PathBuf>,
     /// Figures as JSON.
     #[arg(long)]
     pub json: PathBuf,
-    /// Trade-off picture (misses against safe ground refused, one curve per preset); default:
+    /// Trade-off picture (misses against safe ground refused, one curve per scene); default:
     /// the JSON's path with `.png`.
     #[arg(long)]
     pub png: Option<PathBuf>,
@@ -91,10 +96,10 @@ impl Counts {
     }
 }
 
-/// One row of the result: a preset (or all) and a threshold.
+/// One row of the result: a scene (preset or DEM; or all) and a threshold.
 #[derive(Debug, Serialize)]
 struct Row {
-    preset: String,
+    scene: String,
     relief_m: f32,
     counts: Counts,
     /// `missed / judged_safe`.
@@ -108,7 +113,7 @@ struct Row {
     offered: f64,
     /// The same for the sites with 2 m of clearance (where guidance sends a lander).
     offered_2m: f64,
-    /// Zones (preset × seed) with at least one miss among the 2 m-clearance sites, of all zones:
+    /// Zones (scene × seed) with at least one miss among the 2 m-clearance sites, of all zones:
     /// sites 1.2 m apart share most of their footprint, so misses come in clusters and the
     /// zone count is the sturdier figure.
     zones_missed_2m: (usize, usize),
@@ -129,18 +134,65 @@ struct Report {
 }
 
 /// Score every site of the maps of one zone, for every threshold.
-fn zone_counts(preset: Preset, seed: u64, a: &Args) -> anyhow::Result<Vec<Counts>> {
-    let params = TerrainParams {
-        preset,
-        window: Window::Floor,
-        seed,
-        size_m: 2000.0,
-        pixel_m: 10.0,
-    };
-    let (map, _) = generate(&params, &indicatif::ProgressBar::hidden())
-        .map_err(|e| anyhow::anyhow!("scene: {e}"))?;
-    let (x0, y0, x1, y1) = map.extent_m();
-    let centre = [(x0 + x1) / 2.0, (y0 + y1) / 2.0];
+/// The coarse scene of zone `seed`: a preset generated at 2 km × 10 m (zone at its centre), or
+/// the given DEM (zone at a seed-drawn place at least 300 m inside its edges).
+fn scene(source: &Source, seed: u64) -> anyhow::Result<(std::sync::Arc<Dem>, [f64; 2])> {
+    match source {
+        Source::Preset(preset) => {
+            let params = TerrainParams {
+                preset: *preset,
+                window: Window::Floor,
+                seed,
+                size_m: 2000.0,
+                pixel_m: 10.0,
+            };
+            let (map, _) = generate(&params, &indicatif::ProgressBar::hidden())
+                .map_err(|e| anyhow::anyhow!("scene: {e}"))?;
+            let (x0, y0, x1, y1) = map.extent_m();
+            Ok((map.into(), [(x0 + x1) / 2.0, (y0 + y1) / 2.0]))
+        }
+        Source::Dem(_, map) => {
+            let (x0, y0, x1, y1) = map.extent_m();
+            let m = 300.0;
+            anyhow::ensure!(
+                x1 - x0 > 2.0 * m && y1 - y0 > 2.0 * m,
+                "the DEM is smaller than a landing zone and its frames ({} m)",
+                2.0 * m
+            );
+            let mut rng = rand_pcg::Pcg64::seed_from_u64(seed);
+            let u: f64 = rng.random();
+            let v: f64 = rng.random();
+            Ok((
+                map.clone(),
+                [
+                    x0 + m + u * (x1 - x0 - 2.0 * m),
+                    y0 + m + v * (y1 - y0 - 2.0 * m),
+                ],
+            ))
+        }
+    }
+}
+
+/// Where the coarse scenes come from.
+enum Source {
+    /// A synthetic preset.
+    Preset(Preset),
+    /// A DEM read from a file: its label and heights.
+    Dem(String, std::sync::Arc<Dem>),
+}
+
+impl Source {
+    fn name(&self) -> String {
+        match self {
+            Self::Preset(p) => format!("{p:?}").to_lowercase(),
+            Self::Dem(n, _) => n.clone(),
+        }
+    }
+}
+
+/// Score every site of the maps of one zone, for every threshold.
+fn zone_counts(source: &Source, seed: u64, a: &Args) -> anyhow::Result<Vec<Counts>> {
+    let (map, centre) = scene(source, seed)?;
     let zone: Dem = landing_zone(&map, centre, &LandingZoneConfig::default(), seed)
         .map_err(|e| anyhow::anyhow!("landing zone: {e}"))?;
     let terrain = Terrain {
@@ -218,19 +270,19 @@ fn zone_counts(preset: Preset, seed: u64, a: &Args) -> anyhow::Result<Vec<Counts
 }
 
 /// Misses among the 2 m-clearance sites against the truly safe ground refused, one curve per
-/// preset (and all), each point one threshold (stricter to the right).
+/// scene (and all), each point one threshold (stricter to the right).
 fn picture(rows: &[Row]) -> Plot {
     let mut names: Vec<&str> = Vec::new();
     for r in rows {
-        if !names.contains(&r.preset.as_str()) {
-            names.push(&r.preset);
+        if !names.contains(&r.scene.as_str()) {
+            names.push(&r.scene);
         }
     }
     let mut series = Vec::new();
     for (k, name) in names.iter().enumerate() {
         let mut pts: Vec<(f64, f64, f32)> = rows
             .iter()
-            .filter(|r| r.preset == *name)
+            .filter(|r| r.scene == *name)
             .map(|r| {
                 (
                     100.0 * (1.0 - r.offered),
@@ -261,7 +313,7 @@ fn picture(rows: &[Row]) -> Plot {
     }
     let all: Vec<String> = rows
         .iter()
-        .filter(|r| r.preset == "all")
+        .filter(|r| r.scene == "all")
         .map(|r| format!("{:.2}", r.relief_m))
         .collect();
     Plot {
@@ -289,7 +341,10 @@ fn ratio(a: usize, b: usize) -> f64 {
 
 /// Run `ground-sim hazard-calibrate`.
 pub fn run(a: &Args) -> anyhow::Result<()> {
-    anyhow::ensure!(!a.presets.is_empty(), "--presets: give at least one preset");
+    anyhow::ensure!(
+        !a.presets.is_empty() || a.dem.is_some(),
+        "--presets: give at least one preset (or a --dem)"
+    );
     anyhow::ensure!(
         a.zones > 0 && a.frames > 0,
         "--zones and --frames must be positive"
@@ -303,27 +358,31 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         "--pixel-m must be finite and positive"
     );
     let t0 = Instant::now();
-    let jobs: Vec<(Preset, u64)> = a
-        .presets
-        .iter()
-        .flat_map(|&p| (a.seed..a.seed + a.zones).map(move |s| (p, s)))
+    let mut sources: Vec<Source> = a.presets.iter().map(|&p| Source::Preset(p)).collect();
+    if let Some(path) = &a.dem {
+        let dem = ground_sim::dem::read_geotiff(path)
+            .with_context(|| format!("reading {}", path.display()))?;
+        let label = path
+            .file_stem()
+            .map_or("dem".into(), |s| s.to_string_lossy().into_owned());
+        sources.push(Source::Dem(label, dem.into()));
+    }
+    let jobs: Vec<(usize, u64)> = (0..sources.len())
+        .flat_map(|k| (a.seed..a.seed + a.zones).map(move |s| (k, s)))
         .collect();
     let bar = indicatif::ProgressBar::new(jobs.len() as u64).with_message("landing zones");
-    let per_zone: Vec<(Preset, Vec<Counts>)> = jobs
+    let per_zone: Vec<(usize, Vec<Counts>)> = jobs
         .par_iter()
-        .map(|&(p, s)| {
-            let r = zone_counts(p, s, a).with_context(|| format!("{p:?} seed {s}"));
+        .map(|&(k, s)| {
+            let r = zone_counts(&sources[k], s, a)
+                .with_context(|| format!("{} seed {s}", sources[k].name()));
             bar.inc(1);
-            r.map(|c| (p, c))
+            r.map(|c| (k, c))
         })
         .collect::<anyhow::Result<_>>()?;
     bar.finish_and_clear();
     let mut rows = Vec::new();
-    let name = |p: Preset| format!("{p:?}").to_lowercase();
-    let groups: Vec<Option<Preset>> = a
-        .presets
-        .iter()
-        .copied()
+    let groups: Vec<Option<usize>> = (0..sources.len())
         .map(Some)
         .chain(std::iter::once(None))
         .collect();
@@ -331,15 +390,15 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         for (k, &relief) in a.relief_m.iter().enumerate() {
             let mut c = Counts::default();
             let mut zones = (0, 0);
-            for (p, counts) in &per_zone {
-                if g.is_none_or(|g| g == *p) {
+            for (src, counts) in &per_zone {
+                if g.is_none_or(|g| g == *src) {
                     c.add(&counts[k]);
                     zones.0 += usize::from(counts[k].missed_2m > 0);
                     zones.1 += 1;
                 }
             }
             rows.push(Row {
-                preset: g.map_or("all".into(), name),
+                scene: g.map_or("all".into(), |g| sources[g].name()),
                 relief_m: relief,
                 counts: c,
                 miss_rate: ratio(c.missed, c.judged_safe),
@@ -351,8 +410,9 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
             });
         }
     }
+    let nw = rows.iter().map(|r| r.scene.len()).max().unwrap_or(5).max(5);
     println!(
-        "map relief threshold vs truth (lander 10°, 0.3 m), {} zones × {} frames at {} m per preset, seeds {}..{}",
+        "map relief threshold vs truth (lander 10°, 0.3 m), {} zones × {} frames at {} m per scene, seeds {}..{}",
         a.zones,
         a.frames,
         a.pixel_m,
@@ -360,8 +420,8 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         a.seed + a.zones - 1
     );
     println!(
-        "{:<10} {:>7} {:>7} {:>8} {:>16} {:>8} {:>9} {:>11} {:>11}",
-        "preset",
+        "{:<nw$} {:>7} {:>7} {:>8} {:>16} {:>8} {:>9} {:>11} {:>11}",
+        "scene",
         "relief",
         "sites",
         "miss",
@@ -373,8 +433,8 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
     );
     for r in &rows {
         println!(
-            "{:<10} {:>5.2} m {:>7} {:>7.2}% {:>6.2}% ({:>5}) {:>4}/{:<3} {:>8.2}% {:>10.1}% {:>10.1}%",
-            r.preset,
+            "{:<nw$} {:>5.2} m {:>7} {:>7.2}% {:>6.2}% ({:>5}) {:>4}/{:<3} {:>8.2}% {:>10.1}% {:>10.1}%",
+            r.scene,
             r.relief_m,
             r.counts.sites,
             100.0 * r.miss_rate,
@@ -388,7 +448,7 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         );
     }
     let report = Report {
-        presets: a.presets.iter().map(|&p| name(p)).collect(),
+        presets: sources.iter().map(Source::name).collect(),
         seeds: (a.seed, a.seed + a.zones - 1),
         frames_per_zone: a.frames,
         pixel_m: a.pixel_m,

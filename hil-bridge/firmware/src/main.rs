@@ -105,15 +105,8 @@ fn main() -> ! {
     #[cfg(feature = "uart-link")]
     let (mut rx, mut tx) = (uart::Uart::uart0(), uart::Uart::uart0());
     info!("umbra-hil-firmware: tile of {=usize} features", tile.len());
-    let stored_crc = TILE
-        .0
-        .len()
-        .checked_sub(4)
-        .and_then(|at| TILE.0.get(at..))
-        .and_then(|b| b.try_into().ok())
-        .map_or(0, u32::from_le_bytes);
     let info = TargetInfo {
-        tile_crc: stored_crc,
+        tile_crc: nav_core::tile::stored_crc(&TILE.0).unwrap_or(0),
         tile_features: tile.len() as u32,
         max_frame_width: MAX_FRAME_WIDTH as u16,
     };

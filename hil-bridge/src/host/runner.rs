@@ -577,12 +577,7 @@ pub fn run(opts: &RunOptions) -> Result<Report> {
     if !ack.accepted || ack.version != crate::PROTOCOL_VERSION || ack.session != session {
         bail!("handshake refused: {ack:?}");
     }
-    let tile_crc = set
-        .tile
-        .get(set.tile.len().saturating_sub(4)..)
-        .and_then(|b| b.try_into().ok())
-        .map(u32::from_le_bytes)
-        .unwrap_or(0);
+    let tile_crc = nav_core::tile::stored_crc(&set.tile).unwrap_or(0);
     if ack.tile_crc != tile_crc {
         bail!(
             "the firmware's tile (CRC {:08x}) is not this frame set's ({tile_crc:08x})",
