@@ -5,13 +5,14 @@
 
 use std::process::Command;
 
-#[test]
-fn a_stricter_map_offers_less_ground_and_misses_no_more() {
+/// Run `hazard-calibrate` with `args` (plus `--json`) in a fresh folder; its JSON.
+fn calibrate(args: &[&std::ffi::OsStr]) -> (tempfile::TempDir, serde_json::Value) {
     let dir = tempfile::tempdir().unwrap();
     let json = dir.path().join("calib.json");
     let out = Command::new(env!("CARGO_BIN_EXE_ground-sim"))
-        .args(["hazard-calibrate", "--presets", "plains", "--zones", "1"])
-        .args(["--frames", "1", "--relief-m", "0.3,0.2,0.1", "--json"])
+        .arg("hazard-calibrate")
+        .args(args)
+        .arg("--json")
         .arg(&json)
         .output()
         .unwrap();
@@ -20,8 +21,27 @@ fn a_stricter_map_offers_less_ground_and_misses_no_more() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let v: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let v = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    (dir, v)
+}
+
+fn os(args: &[&'static str]) -> Vec<&'static std::ffi::OsStr> {
+    args.iter().map(|a| std::ffi::OsStr::new(*a)).collect()
+}
+
+#[test]
+fn a_stricter_map_offers_less_ground_and_misses_no_more() {
+    let (dir, v) = calibrate(&os(&[
+        "--presets",
+        "plains",
+        "--zones",
+        "1",
+        "--frames",
+        "1",
+        "--relief-m",
+        "0.3,0.2,0.1",
+    ]));
+    let json = dir.path().join("calib.json");
     let rows: Vec<&serde_json::Value> = v["rows"]
         .as_array()
         .unwrap()
@@ -62,23 +82,19 @@ fn a_real_dem_is_a_scene_of_its_own() {
         );
         return;
     }
-    let dir = tempfile::tempdir().unwrap();
-    let json = dir.path().join("calib.json");
-    let out = Command::new(env!("CARGO_BIN_EXE_ground-sim"))
-        .args(["hazard-calibrate", "--presets", "plains", "--zones", "1"])
-        .args(["--frames", "1", "--relief-m", "0.2", "--dem"])
-        .arg(&real)
-        .arg("--json")
-        .arg(&json)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let v: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let mut args = os(&[
+        "--presets",
+        "plains",
+        "--zones",
+        "1",
+        "--frames",
+        "1",
+        "--relief-m",
+        "0.2",
+        "--dem",
+    ]);
+    args.push(real.as_os_str());
+    let (_dir, v) = calibrate(&args);
     let scenes: Vec<&str> = v["rows"]
         .as_array()
         .unwrap()
