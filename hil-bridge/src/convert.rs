@@ -121,6 +121,7 @@ pub fn job_result(frame_id: u32, out: &JobOutput, fp: &FinalPhase) -> FrameResul
                 HazardError::TooFine => WireHazardError::TooFine,
                 HazardError::TooSmall => WireHazardError::TooSmall,
                 HazardError::TooManySites { .. } => WireHazardError::TooManySites,
+                HazardError::WindowOutside => WireHazardError::WindowOutside,
             })),
             ..blank(frame_id, WireOutcome::Hazard)
         },

@@ -4,14 +4,17 @@
 //!
 //! A frame is one of: TRN on the reference tile ([`FrameJob::Locate`]), a keyframe capture
 //! ([`FrameJob::Keyframe`]), odometry on the held keyframe ([`FrameJob::Odometry`]) or the hazard
-//! map and its decision for the aim ([`FrameJob::Hazard`]). One job per frame keeps every frame
+//! map and its decision for the aim ([`FrameJob::Hazard`]), or its confirmation over a window
+//! around the chosen aim on a finer frame ([`FrameJob::Confirm`]). One job per frame keeps every frame
 //! within the instruction budget: a keyframe capture (≈ 13.7 M) and a hazard map (7–15 M)
 //! together would not be. The keyframe and the hazard map persist between frames in [`FinalPhase`].
 
 use crate::flight::{HazardMap, Keyframe, Workspace};
 use crate::msg::{FrameHeader, FrameJob};
 use nav_core::frame::FrameError;
-use nav_core::hazard::{AimDecision, HazardConfig, HazardError, HazardStats};
+use nav_core::hazard::{
+    AimDecision, CONFIRM_HALF_WINDOW_M, HazardConfig, HazardError, HazardStats,
+};
 use nav_core::odometry::{KeyframePose, OdometryError, OdometryReport, locate_on_keyframe};
 use nav_core::{DemPatch, FrameReport, NavError, Navigator};
 
@@ -92,7 +95,9 @@ pub fn execute(
         (Err(e), FrameJob::Locate) => JobOutput::Locate(Err(NavError::Frame(*e))),
         (Err(e), FrameJob::Keyframe(_)) => JobOutput::Keyframe(Err(OdometryError::Frame(*e))),
         (Err(e), FrameJob::Odometry(_)) => JobOutput::Odometry(Err(OdometryError::Frame(*e))),
-        (Err(e), FrameJob::Hazard(_)) => JobOutput::Hazard(HazardOutcome::BadFrame(*e)),
+        (Err(e), FrameJob::Hazard(_) | FrameJob::Confirm(_)) => {
+            JobOutput::Hazard(HazardOutcome::BadFrame(*e))
+        }
         (Ok(d), FrameJob::Locate) => JobOutput::Locate(nav.locate_dem(ws, d, prior.as_ref())),
         (Ok(d), FrameJob::Keyframe(k)) => {
             let pose = KeyframePose {
@@ -127,6 +132,18 @@ pub fn execute(
                 }
                 Err(e) => HazardOutcome::Refused(e),
             })
+        }
+        (Ok(d), FrameJob::Confirm(aim)) => {
+            let cfg = HazardConfig::confirmation();
+            JobOutput::Hazard(
+                match fp
+                    .hazards
+                    .build_around(d, &cfg, *aim, CONFIRM_HALF_WINDOW_M)
+                {
+                    Ok(stats) => HazardOutcome::Map(stats, fp.hazards.decide(*aim, *aim, &cfg)),
+                    Err(e) => HazardOutcome::Refused(e),
+                },
+            )
         }
     }
 }

@@ -124,7 +124,7 @@ pub struct FrameHeader {
     pub job: FrameJob,
 }
 
-/// What the target does with a frame: the four frame jobs of a descent. Every job runs
+/// What the target does with a frame: the five frame jobs of a descent. Every job runs
 /// the flight code of `nav_core` with the flight configuration, as the descent does.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -142,6 +142,11 @@ pub enum FrameJob {
     /// `HazardConfig`) and decide the aim (`HazardMap::decide`). A frame of its own: the
     /// descent spends one frame on the map, not on odometry.
     Hazard(WireAim),
+    /// 4: confirm the chosen aim on a finer frame: the hazard map of the window around it
+    /// (`nav_core::hazard::HazardMap::build_around`, `HazardConfig::confirmation`,
+    /// `CONFIRM_HALF_WINDOW_M`) and its decision with the aim as its own target. The aim, frame
+    /// pixels `[x, y]`.
+    Confirm([f32; 2]),
 }
 
 /// Where guidance aims and the planned target, frame pixels `[x, y]`.
@@ -426,6 +431,8 @@ pub enum WireHazardError {
     TooSmall,
     /// More sites than the map holds.
     TooManySites,
+    /// The confirmation window holds no site of the frame.
+    WindowOutside,
 }
 
 /// Outcome of one frame.

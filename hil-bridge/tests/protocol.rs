@@ -80,13 +80,28 @@ fn golden() -> Vec<(u16, Message<'static>, &'static str)> {
             "00 02 05 05 06 09 02 02 01 01 01 01 01 01 01 01 01 01 01 01 05 3f 88 25 d7 00",
         ),
         (6, Message::Shutdown, "00 02 06 06 0b 28 7c 1e 6c 00"),
+        (
+            7,
+            Message::FrameHeader(FrameHeader {
+                frame_id: 14,
+                width: 200,
+                height: 200,
+                pixel_m: 0.25,
+                format: SampleFormat::HeightF32Le,
+                payload_bytes: 160_000,
+                payload_crc: 5,
+                prior: None,
+                job: FrameJob::Confirm([125.0, 115.0]),
+            }),
+            "00 02 07 07 02 0e c8 01 c8 01 01 03 80 3e 05 80 e2 09 05 02 04 01 03 fa 42 01 07 e6 42 4d ed 8f 34 00",
+        ),
     ]
 }
 
 #[test]
 fn golden_vectors_encode_and_decode() {
     assert_eq!(
-        PROTOCOL_VERSION, 4,
+        PROTOCOL_VERSION, 5,
         "a version bump needs new golden vectors"
     );
     for (seq, msg, bytes) in golden() {
@@ -283,6 +298,17 @@ fn every_message() -> Vec<Message<'static>> {
                 aim_px: [125.0, 115.0],
                 target_px: [125.0, 115.0],
             }),
+        }),
+        Message::FrameHeader(FrameHeader {
+            frame_id: 14,
+            width: 200,
+            height: 200,
+            pixel_m: 0.25,
+            format: SampleFormat::HeightF32Le,
+            payload_bytes: 160_000,
+            payload_crc: 5,
+            prior: None,
+            job: FrameJob::Confirm([125.0, 115.0]),
         }),
         Message::FrameCost(FrameCost {
             frame_id: 3,

@@ -81,6 +81,36 @@ impl Default for HazardConfig {
     }
 }
 
+impl HazardConfig {
+    /// The confirmation map's settings ([`HazardMap::build_around`] on a frame of
+    /// [`CONFIRM_MAX_PIXEL_M`] or finer, over [`CONFIRM_HALF_WINDOW_M`] around the aim, then
+    /// [`HazardMap::decide`] with the aim as its own target). The first map (0.4 m) chooses
+    /// among much ground but calls 2.5 % of its safe sites safe that are not (a 0.4 m pixel
+    /// averages a small rock's top away); a 0.25 m frame misreads less, so it judges with a
+    /// smaller margin: relief 0.20 m, measured with `ground-sim hazard-calibrate --pixel-m
+    /// 0.25` (lola/shoemaker/plains zones, seeds 101–106: 0.76 % of its safe sites truly
+    /// unsafe, none of those with 2 m of clearance; 0.22 m: 1.5 % and 0.47 %). The aim moves at
+    /// most 10 m: the flyer is about 95 m up and the site was chosen already.
+    pub fn confirmation() -> Self {
+        Self {
+            max_relief_m: 0.20,
+            clearance_m: 2.0,
+            preferred_clearance_m: 3.0,
+            max_reach_m: 10.0,
+            ..Self::default()
+        }
+    }
+}
+
+/// Coarsest frame pixel of the confirmation map, m (95 m above the ground with the descent's
+/// sensor): sixteen pixels across the 4 m footprint.
+pub const CONFIRM_MAX_PIXEL_M: f32 = 0.25;
+
+/// Half side of the confirmation map's window around the aim, m: the confirmation's 10 m reach,
+/// its 3 m preferred clearance and one site to spare. It bounds the map's work: 29 × 29 sites
+/// at 0.25 m pixels against 64 × 64 for a whole 0.4 m frame (docs/bounds.md).
+pub const CONFIRM_HALF_WINDOW_M: f32 = 14.0;
+
 /// Why no hazard map was made.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -93,6 +123,9 @@ pub enum HazardError {
     TooFine,
     /// The frame is smaller than one footprint.
     TooSmall,
+    /// The window of [`HazardMap::build_around`] holds no site of the frame (or is not
+    /// finite).
+    WindowOutside,
     /// More sites than the map holds.
     TooManySites {
         /// Sites the frame would need.
@@ -109,6 +142,7 @@ impl fmt::Display for HazardError {
             Self::TooCoarse => f.write_str("frame too coarse for the lander's footprint"),
             Self::TooFine => f.write_str("frame too fine for the footprint window"),
             Self::TooSmall => f.write_str("frame smaller than one footprint"),
+            Self::WindowOutside => f.write_str("map window holds no site of the frame"),
             Self::TooManySites { needed, capacity } => {
                 write!(f, "{needed} sites needed, the map holds {capacity}")
             }
@@ -168,8 +202,8 @@ pub struct HazardMap<const N: usize> {
     rows: usize,
     /// Frame pixels between sites.
     step_px: usize,
-    /// Frame pixel of site (0, 0) (both axes).
-    first_px: usize,
+    /// Frame pixel `[x, y]` of site (0, 0).
+    first_px: [usize; 2],
     pixel_m: f32,
 }
 
@@ -187,7 +221,7 @@ impl<const N: usize> HazardMap<N> {
             cols: 0,
             rows: 0,
             step_px: 1,
-            first_px: 0,
+            first_px: [0, 0],
             pixel_m: 1.0,
         }
     }
@@ -205,22 +239,25 @@ impl<const N: usize> HazardMap<N> {
     /// Frame pixel of lattice site `(i, j)`.
     pub fn site_px(&self, i: usize, j: usize) -> [f32; 2] {
         [
-            (self.first_px + i * self.step_px) as f32,
-            (self.first_px + j * self.step_px) as f32,
+            (self.first_px[0] + i * self.step_px) as f32,
+            (self.first_px[1] + j * self.step_px) as f32,
         ]
     }
 
     /// The lattice site nearest to frame pixel `q` (clamped to the lattice).
     pub fn nearest_site(&self, q: [f32; 2]) -> (usize, usize) {
-        let idx = |v: f32, n: usize| {
-            let k = libm::roundf((v - self.first_px as f32) / self.step_px as f32);
+        let idx = |v: f32, first: usize, n: usize| {
+            let k = libm::roundf((v - first as f32) / self.step_px as f32);
             if k.is_finite() && k > 0.0 {
                 (k as usize).min(n.saturating_sub(1))
             } else {
                 0
             }
         };
-        (idx(q[0], self.cols), idx(q[1], self.rows))
+        (
+            idx(q[0], self.first_px[0], self.cols),
+            idx(q[1], self.first_px[1], self.rows),
+        )
     }
 
     /// Clearance of site `(i, j)`, m (0: unsafe or outside the lattice).
@@ -246,6 +283,30 @@ impl<const N: usize> HazardMap<N> {
         &mut self,
         dem: &DemPatch<'_>,
         cfg: &HazardConfig,
+    ) -> Result<HazardStats, HazardError> {
+        self.build_window(dem, cfg, None)
+    }
+
+    /// Judge only the sites within `half_window_m` (m, along each frame axis) of `center_px`
+    /// (frame pixels `[x, y]`): a confirmation map around an aim already chosen, on a frame
+    /// finer than the one that chose it. The window's edge counts as unsafe for the clearance,
+    /// like the frame's. [`HazardError::WindowOutside`] when the window holds no site or its
+    /// centre or size is not finite.
+    pub fn build_around(
+        &mut self,
+        dem: &DemPatch<'_>,
+        cfg: &HazardConfig,
+        center_px: [f32; 2],
+        half_window_m: f32,
+    ) -> Result<HazardStats, HazardError> {
+        self.build_window(dem, cfg, Some((center_px, half_window_m)))
+    }
+
+    fn build_window(
+        &mut self,
+        dem: &DemPatch<'_>,
+        cfg: &HazardConfig,
+        window: Option<([f32; 2], f32)>,
     ) -> Result<HazardStats, HazardError> {
         self.cols = 0;
         self.rows = 0;
@@ -275,8 +336,30 @@ impl<const N: usize> HazardMap<N> {
             return Err(HazardError::TooSmall);
         }
         let step = (libm::roundf(cfg.site_step_m / px) as usize).max(1);
-        let cols = (w - 2 * half - 1) / step + 1;
-        let rows = (h - 2 * half - 1) / step + 1;
+        let all_cols = (w - 2 * half - 1) / step + 1;
+        let all_rows = (h - 2 * half - 1) / step + 1;
+        // Lattice index range `[first, last]` per axis: the whole lattice, or the sites whose
+        // centres lie within the window.
+        let range = |c: f32, hw_m: f32, n: usize| -> Option<(usize, usize)> {
+            let (lo, hi) = (
+                libm::ceilf((c - hw_m / px - half as f32) / step as f32),
+                libm::floorf((c + hw_m / px - half as f32) / step as f32),
+            );
+            if !(lo.is_finite() && hi.is_finite() && hw_m >= 0.0) || hi < 0.0 || lo > hi {
+                return None;
+            }
+            let first = if lo > 0.0 { lo as usize } else { 0 };
+            let last = if hi > 0.0 { hi as usize } else { 0 }.min(n - 1);
+            (first <= last).then_some((first, last))
+        };
+        let ((i0, i1), (j0, j1)) = match window {
+            None => ((0, all_cols - 1), (0, all_rows - 1)),
+            Some((c, hw)) => match (range(c[0], hw, all_cols), range(c[1], hw, all_rows)) {
+                (Some(a), Some(b)) => (a, b),
+                _ => return Err(HazardError::WindowOutside),
+            },
+        };
+        let (cols, rows) = (i1 - i0 + 1, j1 - j0 + 1);
         let n = cols * rows;
         if n > N {
             return Err(HazardError::TooManySites {
@@ -340,7 +423,7 @@ impl<const N: usize> HazardMap<N> {
         };
         for j in 0..rows {
             for i in 0..cols {
-                let (cx, cy) = (half + i * step, half + j * step);
+                let (cx, cy) = (half + (i0 + i) * step, half + (j0 + j) * step);
                 let at = cy * w + cx;
                 let z0 = dem.height_at(cx, cy).unwrap_or(f32::NAN);
                 let (mut s, mut sx, mut sy, mut bad) = (0.0f32, 0.0f32, 0.0f32, !z0.is_finite());
@@ -408,7 +491,7 @@ impl<const N: usize> HazardMap<N> {
         self.cols = cols;
         self.rows = rows;
         self.step_px = step;
-        self.first_px = half;
+        self.first_px = [half + i0 * step, half + j0 * step];
         self.pixel_m = px;
         self.distance_transform();
         Ok(stats)

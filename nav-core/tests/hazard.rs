@@ -190,3 +190,73 @@ fn the_decision_keeps_a_roomy_aim_and_moves_one_on_a_rock() {
     );
     assert_eq!(map.nearest_with([f32::NAN; 2], 0.0, &cfg), None);
 }
+
+#[test]
+fn a_window_judges_its_sites_as_the_whole_frame_does() {
+    use nav_core::hazard::CONFIRM_HALF_WINDOW_M;
+    let (c, z) = rock_frame();
+    let dem = DemPatch::new_checked(&z, SIDE, SIDE, PX).unwrap();
+    let cfg = HazardConfig::confirmation();
+    let mut whole = Box::new(HazardMap::new());
+    let mut part = Box::new(HazardMap::new());
+    let s_whole = whole.build(&dem, &cfg).unwrap();
+    let centre = [(c - 3.0) / PX, (c + 2.0) / PX];
+    let s_part = part
+        .build_around(&dem, &cfg, centre, CONFIRM_HALF_WINDOW_M)
+        .unwrap();
+    assert!(s_part.sites < s_whole.sites, "{s_part:?} {s_whole:?}");
+    let (cols, rows) = part.size();
+    let step = part.site_px(1, 1)[0] - part.site_px(0, 0)[0];
+    // Every window site is a site of the whole lattice with the same verdict, and lies
+    // within the window.
+    for j in 0..rows {
+        for i in 0..cols {
+            let p = part.site_px(i, j);
+            assert!((p[0] - centre[0]).abs() * PX <= CONFIRM_HALF_WINDOW_M + 1e-3);
+            assert!((p[1] - centre[1]).abs() * PX <= CONFIRM_HALF_WINDOW_M + 1e-3);
+            let (wi, wj) = whole.nearest_site(p);
+            assert_eq!(whole.site_px(wi, wj), p);
+            assert_eq!(whole.is_safe(wi, wj), part.is_safe(i, j), "site {p:?}");
+        }
+    }
+    // The window reaches its edge sites: one step more would leave it.
+    let last = part.site_px(cols - 1, rows - 1);
+    assert!((last[0] + step - centre[0]) * PX > CONFIRM_HALF_WINDOW_M);
+    // The rock under the aim moves it, within the confirmation's reach.
+    let on_rock = [c / PX; 2];
+    part.build_around(&dem, &cfg, on_rock, CONFIRM_HALF_WINDOW_M)
+        .unwrap();
+    match part.decide(on_rock, on_rock, &cfg) {
+        AimDecision::Move(site) => {
+            assert!(site.from_target_m <= cfg.max_reach_m, "{site:?}");
+            assert!(site.clearance_m >= cfg.clearance_m, "{site:?}");
+        }
+        other => panic!("an aim on the rock must move: {other:?}"),
+    }
+}
+
+#[test]
+fn a_window_off_the_frame_or_not_finite_is_refused() {
+    let z = frame(|_, _| 0.0);
+    let dem = DemPatch::new_checked(&z, SIDE, SIDE, PX).unwrap();
+    let cfg = HazardConfig::confirmation();
+    let mut map = Box::new(HazardMap::new());
+    for (c, hw) in [
+        ([-100.0, 50.0], 5.0),
+        ([50.0, 1000.0], 5.0),
+        ([f32::NAN, 50.0], 5.0),
+        ([50.0, 50.0], f32::INFINITY),
+        ([50.0, 50.0], -1.0),
+    ] {
+        assert_eq!(
+            map.build_around(&dem, &cfg, c, hw),
+            Err(HazardError::WindowOutside),
+            "{c:?} {hw}"
+        );
+        assert_eq!(map.size(), (0, 0));
+    }
+    // A window reaching past the frame keeps the sites inside it.
+    let s = map.build_around(&dem, &cfg, [2.0, 2.0], 6.0).unwrap();
+    assert!(s.sites > 0 && s.safe == s.sites, "{s:?}");
+    assert_eq!(map.site_px(0, 0), [5.0, 5.0]);
+}

@@ -103,6 +103,11 @@ proptest! {
             prop_assert!(site.clearance_m > 0.0 && site.from_target_m <= cfg.max_reach_m);
         }
         let _ = map.nearest_site(target);
+        // A confirmation window anywhere (off the frame, not finite) never panics either.
+        if let Ok(s) = map.build_around(&dem, &cfg, target, footprint_m * 2.0) {
+            prop_assert_eq!(s.safe + s.too_steep + s.too_rough + s.no_data, s.sites);
+            let _ = map.decide(target, target, &cfg);
+        }
     }
 
     #[test]

@@ -65,6 +65,10 @@ pub struct Args {
     /// Land wherever guidance points: no hazard map of the final frames, no safe-site choice.
     #[arg(long)]
     pub no_hazard_avoidance: bool,
+    /// Keep the first hazard map's choice: no confirmation of the chosen site on a finer frame
+    /// (for comparison; the flight design confirms).
+    #[arg(long)]
+    pub no_hazard_confirmation: bool,
     /// No keyframe odometry below the TRN floor (2 km): the final phase flies on the IMU and
     /// whatever other aiding is on, as before odometry existed.
     #[arg(long)]
@@ -158,6 +162,12 @@ pub struct DescentSummary {
     pub hazard_maps: usize,
     /// Runs whose aim moved to a safe site.
     pub runs_retargeted: usize,
+    /// Confirmation maps made (all runs; finer frames, window around the chosen aim).
+    #[serde(default)]
+    pub confirm_maps: usize,
+    /// Runs whose confirmation moved the aim.
+    #[serde(default)]
+    pub runs_moved_by_confirmation: usize,
     /// The landing zones' settings (`null`: none).
     pub landing_zone: Option<LandingZoneConfig>,
     /// Median height above terrain of each run's last accepted fix or offset, m.
@@ -206,6 +216,7 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         },
         odometry: !a.no_odometry,
         hazard_avoidance: !a.no_hazard_avoidance,
+        hazard_confirm: !a.no_hazard_confirmation,
         ..d
     };
     // Release points and targets: inside the DEM, a cruise frame's reach from the edges.
@@ -412,6 +423,8 @@ pub fn report(
         site_from_target_p95_m: site_pct(0.95),
         hazard_maps: per_run.iter().map(|r| r.hazard_maps).sum(),
         runs_retargeted: per_run.iter().filter(|r| r.site_changes > 0).count(),
+        confirm_maps: per_run.iter().map(|r| r.confirm_maps).sum(),
+        runs_moved_by_confirmation: per_run.iter().filter(|r| r.confirm_moves > 0).count(),
         last_aid_agl_p50_m: percentile(
             &mut per_run.iter().map(|r| r.last_aid_agl_m).collect::<Vec<_>>(),
             0.5,
@@ -466,6 +479,12 @@ pub fn report(
             summary.site_from_target_p50_m,
             summary.site_from_target_p95_m
         );
+        if summary.config.hazard_confirm {
+            println!(
+                "confirmation {} maps around the chosen aim on finer frames; {} runs moved by them",
+                summary.confirm_maps, summary.runs_moved_by_confirmation
+            );
+        }
     }
     if summary.touchdowns_judged > 0 {
         println!(

@@ -10,7 +10,7 @@
 use nav_core::filter::{
     FilterConfig, FixMeasurement, InitialState, NavFilter, OffsetMeasurement, UpdateOutcome,
 };
-use nav_core::hazard::{AimDecision, HazardConfig};
+use nav_core::hazard::{AimDecision, CONFIRM_HALF_WINDOW_M, CONFIRM_MAX_PIXEL_M, HazardConfig};
 use nav_core::odometry::KeyframePose;
 use nav_core::{Navigator, Prior};
 use rand::{RngExt, SeedableRng};
@@ -161,6 +161,15 @@ pub struct DescentConfig {
     /// The lander's tolerances and the site choice's limits.
     #[serde(skip)]
     pub hazard: HazardConfig,
+    /// Once a site is chosen, confirm it on one finer frame
+    /// ([`nav_core::hazard::CONFIRM_MAX_PIXEL_M`] or finer): a map of the window around the
+    /// aim ([`nav_core::hazard::HazardMap::build_around`]) under `hazard_confirm_cfg`, which
+    /// keeps the aim or moves it a few metres.
+    #[serde(default)]
+    pub hazard_confirm: bool,
+    /// The confirmation map's settings.
+    #[serde(skip, default = "HazardConfig::confirmation")]
+    pub hazard_confirm_cfg: HazardConfig,
     /// Shortest hop, m.
     pub hop_min_m: f64,
     /// Longest hop, m.
@@ -206,6 +215,8 @@ impl Default for DescentConfig {
             hazard_max_pixel_m: 0.4,
             hazard_min_agl_m: 60.0,
             hazard: HazardConfig::default(),
+            hazard_confirm: true,
+            hazard_confirm_cfg: HazardConfig::confirmation(),
             hop_min_m: 2000.0,
             hop_max_m: 15000.0,
             release_sigma_m: 100.0,
@@ -330,6 +341,12 @@ pub struct RunResult {
     /// Maps on which the aim was unsafe and no safe site was within reach.
     #[serde(default)]
     pub hazard_no_site: usize,
+    /// Confirmation maps made (finer frames, window around the chosen aim).
+    #[serde(default)]
+    pub confirm_maps: usize,
+    /// Confirmation maps that moved the aim.
+    #[serde(default)]
+    pub confirm_moves: usize,
     /// The last hazard map (pictured run only).
     #[serde(skip)]
     pub hazard_picture: Option<HazardPicture>,
@@ -506,6 +523,8 @@ pub fn fly(
         hazard_maps: 0,
         site_changes: 0,
         hazard_no_site: 0,
+        confirm_maps: 0,
+        confirm_moves: 0,
         hazard_picture: None,
         touchdown_safe: None,
         touchdown_slope_deg: f64::NAN,
@@ -532,6 +551,10 @@ pub fn fly(
     // every frame moved the aim 7 times in 8 maps and landed no safer), and each map costs the
     // frame's odometry.
     let mut site_chosen = false;
+    // ... except one confirmation of the chosen site on a finer frame, judged with a smaller
+    // sensing margin over a window around the aim: the 0.4 m map misses small rocks the finer
+    // frame sees (`HazardConfig::confirmation`).
+    let mut confirmed = false;
     // The frame after a map without a site rests from mapping.
     let mut map_rest = false;
     let mut final_nees_sum = 0.0;
@@ -711,9 +734,15 @@ pub fn fly(
                     && !site_chosen
                     && pixel_m <= cfg.hazard_max_pixel_m
                     && agl >= cfg.hazard_min_agl_m;
+                let confirm_due = cfg.hazard_avoidance
+                    && cfg.hazard_confirm
+                    && site_chosen
+                    && !confirmed
+                    && pixel_m <= f64::from(CONFIRM_MAX_PIXEL_M)
+                    && agl >= cfg.hazard_min_agl_m;
                 // After a map that found no site, the next frame goes to odometry: retrying on
                 // every frame would leave the filter unaided down to the last map's height.
-                let map_due = map_window && !map_rest;
+                let map_due = (map_window || confirm_due) && !map_rest;
                 map_rest = false;
                 if !cfg.odometry || map_due {
                     // Frames for the hazard map only.
@@ -794,25 +823,48 @@ pub fn fly(
                         pixel_m as f32,
                     )
                     .map_err(|e| anyhow::anyhow!("hazard frame: {e}"))?;
-                    if hazards.build(&dem, &cfg.hazard).is_ok() {
-                        out.hazard_maps += 1;
-                        let pe = filt.position_m();
-                        let h_est = -filt.yaw_rad();
-                        let (w, hh) = (frame.width, frame.height);
+                    let pe = filt.position_m();
+                    let h_est = -filt.yaw_rad();
+                    let (w, hh) = (frame.width, frame.height);
+                    let aim_now =
+                        en_to_frame_px([aim[0] - pe[0], aim[1] - pe[1]], h_est, pixel_m, w, hh);
+                    // The confirmation judges a window around the aim and may move it only a
+                    // few metres from there: the aim is its own target.
+                    let (hz_cfg, built, decide_target) = if confirm_due {
+                        let c = cfg.hazard_confirm_cfg;
+                        let b = hazards.build_around(&dem, &c, aim_now, CONFIRM_HALF_WINDOW_M);
+                        (c, b, Some(aim_now))
+                    } else {
+                        (cfg.hazard, hazards.build(&dem, &cfg.hazard), None)
+                    };
+                    if built.is_ok() {
+                        if confirm_due {
+                            out.confirm_maps += 1;
+                        } else {
+                            out.hazard_maps += 1;
+                        }
                         // One decision (`HazardMap::decide`, as the target makes it): keep an
                         // aim that is safe with its clearance, else move it near the target.
-                        let aim_px =
-                            en_to_frame_px([aim[0] - pe[0], aim[1] - pe[1]], h_est, pixel_m, w, hh);
-                        let target_px = en_to_frame_px(
-                            [target[0] - pe[0], target[1] - pe[1]],
-                            h_est,
-                            pixel_m,
-                            w,
-                            hh,
-                        );
-                        match hazards.decide(aim_px, target_px, &cfg.hazard) {
-                            AimDecision::Keep { .. } => site_chosen = true,
+                        let aim_px = aim_now;
+                        let target_px = decide_target.unwrap_or_else(|| {
+                            en_to_frame_px(
+                                [target[0] - pe[0], target[1] - pe[1]],
+                                h_est,
+                                pixel_m,
+                                w,
+                                hh,
+                            )
+                        });
+                        match hazards.decide(aim_px, target_px, &hz_cfg) {
+                            AimDecision::Keep { .. } => {
+                                confirmed = site_chosen;
+                                site_chosen = true;
+                            }
                             AimDecision::Move(site) => {
+                                if site_chosen {
+                                    confirmed = true;
+                                    out.confirm_moves += 1;
+                                }
                                 let d = frame_px_to_en(site.frame_px, h_est, pixel_m, w, hh);
                                 aim = [pe[0] + d[0], pe[1] + d[1]];
                                 // Where that spot truly is: the frame is centred on the truth.

@@ -31,7 +31,7 @@ pub const TERRAIN_SIDE: usize = 600;
 /// Tile ground sample distance, metres.
 pub const TILE_PIXEL_M: f64 = 20.0;
 /// Format version of `frames.bin` (bumped on any change of its layout).
-pub const FRAMES_FORMAT_VERSION: u32 = 2;
+pub const FRAMES_FORMAT_VERSION: u32 = 3;
 /// Terrain seed.
 pub const TERRAIN_SEED: u64 = 8;
 /// Gentle-terrain frames (relief scaled by [`GENTLE_RELIEF`]) sent with a prior.
@@ -79,6 +79,11 @@ pub enum FrameKind {
     /// safe, so every footprint is read twice (plane fit and relief), and a boulder on the aim,
     /// so the choice scans the whole lattice.
     StressHazard,
+    /// Final phase: the chosen aim confirmed on a finer frame (a map of the window around it).
+    Confirm,
+    /// Final phase worst case for the confirmation: gentle ground, every footprint of the
+    /// window read twice, and a boulder on the aim.
+    StressConfirm,
 }
 
 /// Ground truth of a terrain frame.
@@ -486,7 +491,7 @@ fn final_phase_frames(dem: &Dem, frames: &mut Vec<Frame>) -> Result<()> {
     let rel_sigma = 1e-3;
     // (name, kind, pixel m, frame centre from the landing-zone centre [east, north] m, heading
     // deg)
-    let plan: [(&str, FrameKind, f64, [f64; 2], f64); 9] = [
+    let plan: [(&str, FrameKind, f64, [f64; 2], f64); 11] = [
         (
             "final-key-4.0m",
             FrameKind::Keyframe,
@@ -537,6 +542,13 @@ fn final_phase_frames(dem: &Dem, frames: &mut Vec<Frame>) -> Result<()> {
             24.0,
         ),
         (
+            "final-confirm-0.25m",
+            FrameKind::Confirm,
+            0.25,
+            [1.5, -0.5],
+            24.0,
+        ),
+        (
             "stress-odometry",
             FrameKind::StressOdometry,
             0.4,
@@ -547,6 +559,13 @@ fn final_phase_frames(dem: &Dem, frames: &mut Vec<Frame>) -> Result<()> {
             "stress-hazard",
             FrameKind::StressHazard,
             0.4,
+            [2.0, -1.0],
+            24.0,
+        ),
+        (
+            "stress-confirm",
+            FrameKind::StressConfirm,
+            0.25,
             [2.0, -1.0],
             24.0,
         ),
@@ -572,11 +591,14 @@ fn final_phase_frames(dem: &Dem, frames: &mut Vec<Frame>) -> Result<()> {
                     pixel_rel_sigma: rel_sigma,
                 })
             }
-            FrameKind::Hazard | FrameKind::StressHazard => {
-                // The target 10 m right of and 6 m below the frame centre (frame axes), the aim
-                // still on it: the map keeps it or moves it.
+            FrameKind::Hazard
+            | FrameKind::StressHazard
+            | FrameKind::Confirm
+            | FrameKind::StressConfirm => {
+                // The target 25 px right of and 15 px below the frame centre (frame axes), the
+                // aim still on it: the map keeps it or moves it.
                 let target = [side / 2.0 + 25.0, side / 2.0 + 15.0];
-                if kind == FrameKind::StressHazard {
+                if matches!(kind, FrameKind::StressHazard | FrameKind::StressConfirm) {
                     // Gentle swell a few centimetres high, every footprint read in full, and one
                     // 0.8 m boulder on the aim: the choice then scans the whole lattice.
                     let tex = stress(FrameKind::Textured, 93);
@@ -588,10 +610,14 @@ fn final_phase_frames(dem: &Dem, frames: &mut Vec<Frame>) -> Result<()> {
                         }
                     }
                 }
-                FrameJob::Hazard(WireAim {
-                    aim_px: target,
-                    target_px: target,
-                })
+                if matches!(kind, FrameKind::Confirm | FrameKind::StressConfirm) {
+                    FrameJob::Confirm(target)
+                } else {
+                    FrameJob::Hazard(WireAim {
+                        aim_px: target,
+                        target_px: target,
+                    })
+                }
             }
             _ => {
                 let Some(kp) = key else {

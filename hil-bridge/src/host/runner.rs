@@ -379,6 +379,7 @@ fn job_name(f: &Frame) -> String {
         FrameJob::Keyframe(_) => "keyframe",
         FrameJob::Odometry(_) => "odometry",
         FrameJob::Hazard(_) => "hazard",
+        FrameJob::Confirm(_) => "confirm",
     }
     .into()
 }
