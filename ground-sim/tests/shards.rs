@@ -208,6 +208,12 @@ fn merged_shards_equal_the_single_run_byte_for_byte() {
         ] {
             assert_same_bytes(&single.join(png), &out.join(png));
         }
+        // The confirmation map's picture, when run 0 made one: the same from shards too.
+        let png = "descent-confirm.png";
+        assert_eq!(single.join(png).exists(), out.join(png).exists());
+        if single.join(png).exists() {
+            assert_same_bytes(&single.join(png), &out.join(png));
+        }
     }
     println!("descent: {:.1} s", t1.elapsed().as_secs_f64());
     let d: serde_json::Value =

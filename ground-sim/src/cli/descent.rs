@@ -163,11 +163,18 @@ pub struct DescentSummary {
     /// Runs whose aim moved to a safe site.
     pub runs_retargeted: usize,
     /// Confirmation maps made (all runs; finer frames, window around the chosen aim).
-    #[serde(default)]
     pub confirm_maps: usize,
     /// Runs whose confirmation moved the aim.
-    #[serde(default)]
     pub runs_moved_by_confirmation: usize,
+    /// Runs whose ground within the site choice's reach (30 m) of the target is at least half
+    /// safe by the truth: the landing zones the 99 % goal speaks of.
+    pub open_zone_runs: usize,
+    /// Of those, the fraction that touched down safely.
+    pub open_zone_safe_frac: f64,
+    /// Unsafe touchdowns whose chosen spot was itself unsafe by the truth (the map's misses).
+    pub unsafe_on_unsafe_site: usize,
+    /// Unsafe touchdowns whose chosen spot was safe (the lander's dispersion carried it off).
+    pub unsafe_on_safe_site: usize,
     /// The landing zones' settings (`null`: none).
     pub landing_zone: Option<LandingZoneConfig>,
     /// Median height above terrain of each run's last accepted fix or offset, m.
@@ -353,7 +360,7 @@ pub fn report(
         if let Some(h) = r.history {
             let mut shown = r.result.clone();
             shown.history = h;
-            shown.hazard_picture = r.hazard_picture;
+            shown.hazard_pictures = r.hazard_pictures;
             pictured.get_or_insert(shown);
         }
         per_run.push(r.result);
@@ -368,6 +375,11 @@ pub fn report(
             p,
         )
     };
+    // The runs the 99 % goal speaks of: at least half the ground within reach is safe.
+    let open: Vec<&RunResult> = per_run
+        .iter()
+        .filter(|r| r.reach_safe_frac >= 0.5 && r.touchdown_safe.is_some())
+        .collect();
     let summary = DescentSummary {
         runs: per_run.len(),
         seed: spec.seed,
@@ -425,6 +437,20 @@ pub fn report(
         runs_retargeted: per_run.iter().filter(|r| r.site_changes > 0).count(),
         confirm_maps: per_run.iter().map(|r| r.confirm_maps).sum(),
         runs_moved_by_confirmation: per_run.iter().filter(|r| r.confirm_moves > 0).count(),
+        open_zone_runs: open.len(),
+        open_zone_safe_frac: open
+            .iter()
+            .filter(|r| r.touchdown_safe == Some(true))
+            .count() as f64
+            / open.len() as f64,
+        unsafe_on_unsafe_site: per_run
+            .iter()
+            .filter(|r| r.touchdown_safe == Some(false) && r.site_safe == Some(false))
+            .count(),
+        unsafe_on_safe_site: per_run
+            .iter()
+            .filter(|r| r.touchdown_safe == Some(false) && r.site_safe == Some(true))
+            .count(),
         last_aid_agl_p50_m: percentile(
             &mut per_run.iter().map(|r| r.last_aid_agl_m).collect::<Vec<_>>(),
             0.5,
@@ -493,6 +519,17 @@ pub fn report(
             summary.touchdowns_judged,
             100.0 * summary.target_area_safe_frac
         );
+        println!(
+            "             {:.1} % of the {} runs whose ground within reach of the target is at least half safe",
+            100.0 * summary.open_zone_safe_frac,
+            summary.open_zone_runs
+        );
+        if summary.unsafe_on_unsafe_site + summary.unsafe_on_safe_site > 0 {
+            println!(
+                "             unsafe: {} on a spot the truth calls unsafe (a map's miss, or nothing safe in reach), {} carried off a safe spot",
+                summary.unsafe_on_unsafe_site, summary.unsafe_on_safe_site
+            );
+        }
     }
     println!(
         "last aid     median {:.0} m above the terrain, {:.0} s before touchdown",
@@ -609,8 +646,12 @@ fn write_pictures(r: &RunResult, dir: &std::path::Path) -> anyhow::Result<()> {
         .save(&p2)
         .with_context(|| format!("writing {}", p2.display()))?;
     println!("pictures     {} {}", p1.display(), p2.display());
-    if let Some(hz) = &r.hazard_picture {
-        let p3 = dir.join("descent-hazard.png");
+    for hz in &r.hazard_pictures {
+        let p3 = dir.join(if hz.confirmation {
+            "descent-confirm.png"
+        } else {
+            "descent-hazard.png"
+        });
         hazard_picture(hz, &p3)?;
         println!("             {}", p3.display());
     }
@@ -618,8 +659,8 @@ fn write_pictures(r: &RunResult, dir: &std::path::Path) -> anyhow::Result<()> {
 }
 
 /// The pictured run's hazard map: the frame's hillshade, unsafe sites tinted red, the original
-/// target (blue cross) and the chosen site (green ring), frame axes, 3 screen pixels per frame
-/// pixel.
+/// target (blue cross; a confirmation: the aim before it) and the chosen site (green ring),
+/// frame axes, 3 screen pixels per frame pixel.
 fn hazard_picture(hz: &HazardPicture, path: &Path) -> anyhow::Result<()> {
     use ground_sim::dem::{Dem, GeoRef};
     use ground_sim::pictures::render::{Sun, draw_text, hillshade};
@@ -683,7 +724,11 @@ fn hazard_picture(hz: &HazardPicture, path: &Path) -> anyhow::Result<()> {
         &mut img,
         4,
         4,
-        &format!("hazards, {:.2} m px: x target, o site", hz.pixel_m),
+        &if hz.confirmation {
+            format!("confirm {:.2} m px: x before, o after", hz.pixel_m)
+        } else {
+            format!("hazards, {:.2} m px: x target, o site", hz.pixel_m)
+        },
         [0, 0, 0],
     );
     img.save(path)

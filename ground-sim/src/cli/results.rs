@@ -433,9 +433,13 @@ pub fn run(a: &Args, dispatch: &dyn Fn(&[String]) -> anyhow::Result<()>) -> anyh
     )?;
     writeln!(
         md,
-        "Around each target the truth terrain carries a landing zone (`ground-sim landing-zone`: 512 m at 0.25 m, sub-metre roughness, equilibrium small craters, Golombek & Rapp rocks with k = 0.08; docs/terrain.md). Below 2 km every frame (range noise shrinking with range, 2 cm floor) is located on a keyframe of the flyer's own (`nav_core::odometry`: an earlier frame turned into a tile in RAM, a new one whenever the frames are 0.55× finer) down to 30 m above the terrain; the displacement goes to the filter against its cloned keyframe position. With hazard avoidance, the first frame of 0.4 m pixels or finer (about 150 m up) is mapped instead of being used for odometry (`nav_core::hazard`: plane tilt ≤ {hz_slope}° and relief ≤ {hz_relief} m over the 4 m footprint, the lander's 10° and 0.3 m less a sensing margin measured with `ground-sim hazard-calibrate`, docs/registration.md); an aim with 2 m of clearance is kept, else guidance diverts to the nearest safe site with 4 m clearance (else 2 m, else the widest) within 30 m. A touchdown is safe when the truth landing zone under its 4 m footprint is within 10° and 0.3 m; the landing error is measured to the spot aimed at (the target, or the chosen site).\n",
+        "Around each target the truth terrain carries a landing zone (`ground-sim landing-zone`: 512 m at 0.25 m, sub-metre roughness, equilibrium small craters, Golombek & Rapp rocks with k = 0.08; docs/terrain.md). Below 2 km every frame (range noise shrinking with range, 2 cm floor) is located on a keyframe of the flyer's own (`nav_core::odometry`: an earlier frame turned into a tile in RAM, a new one whenever the frames are 0.55× finer) down to 30 m above the terrain; the displacement goes to the filter against its cloned keyframe position. With hazard avoidance, the first frame of 0.4 m pixels or finer (about 150 m up) is mapped instead of being used for odometry (`nav_core::hazard`: plane tilt ≤ {hz_slope}° and relief ≤ {hz_relief} m over the 4 m footprint, the lander's 10° and 0.3 m less a sensing margin measured with `ground-sim hazard-calibrate`, docs/registration.md); an aim with 2 m of clearance is kept, else guidance diverts to the nearest safe site with 4 m clearance (else 2 m, else the widest) within 30 m. The chosen site is then confirmed once on the first frame of {cf_px} m pixels or finer (about 95 m up): a map of the ±{cf_win} m window around the aim only (`HazardMap::build_around`, relief ≤ {cf_relief} m), which keeps the aim if it has 2 m of clearance there or moves it up to {cf_reach} m. A touchdown is safe when the truth landing zone under its 4 m footprint is within 10° and 0.3 m; the landing error is measured to the spot aimed at (the target, or the chosen site). The goal (≥ 99 % safe) is set for landing zones where at least half the cells are safe: the column after the safe touchdowns counts the runs whose ground within the choice's 30 m reach of the target is (truth), the others are targets on a crater wall or a rock field with little or nothing safe in reach. Unsafe touchdowns are split into those on a spot the truth calls unsafe (the maps passed it, or no safe site was in reach) and those carried off a safe spot.\n",
         hz_slope = nav_core::hazard::HazardConfig::default().max_slope_deg,
         hz_relief = nav_core::hazard::HazardConfig::default().max_relief_m,
+        cf_px = nav_core::hazard::CONFIRM_MAX_PIXEL_M,
+        cf_win = nav_core::hazard::CONFIRM_HALF_WINDOW_M,
+        cf_relief = nav_core::hazard::HazardConfig::confirmation().max_relief_m,
+        cf_reach = nav_core::hazard::HazardConfig::confirmation().max_reach_m,
     )?;
     writeln!(
         md,
@@ -443,9 +447,12 @@ pub fn run(a: &Args, dispatch: &dyn Fn(&[String]) -> anyhow::Result<()>) -> anyh
     )?;
     writeln!(
         md,
-        "| map | aiding | hazard avoidance | runs | landing error p50 / p95 / max (m) | safe touchdowns | ground within 10 m of the targets safe | site from target p50 / p95 (m) | nav error RMS (m) | fixes / offsets accepted | offset NEES mean | NEES in 95 % band (all / final) | mean NEES |"
+        "| map | aiding | hazard avoidance | runs | landing error p50 / p95 / max (m) | safe touchdowns | … where ≥ 50 % of the ground within 30 m of the target is safe (runs) | ground within 10 m of the targets safe | site from target p50 / p95 (m) | nav error RMS (m) | fixes / offsets accepted | offset NEES mean | NEES in 95 % band (all / final) | mean NEES |"
     )?;
-    writeln!(md, "|---|---|---|---|---|---|---|---|---|---|---|---|---|")?;
+    writeln!(
+        md,
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
+    )?;
     let mut first = true;
     for (preset, map_label) in [
         ("lola", "LOLA-calibrated"),
@@ -496,6 +503,21 @@ pub fn run(a: &Args, dispatch: &dyn Fn(&[String]) -> anyhow::Result<()>) -> anyh
                     v.push("--no-hazard-avoidance");
                 }
                 go(&v)?;
+                // The first campaign's hazard and confirmation maps, shown in
+                // docs/registration.md.
+                if v.contains(&"--png") {
+                    for (from, to) in [
+                        ("descent-hazard.png", "descent-hazard-lola.png"),
+                        ("descent-confirm.png", "descent-confirm-lola.png"),
+                    ] {
+                        let src = Path::new(&png).join(from);
+                        if src.exists() {
+                            std::fs::create_dir_all(&a.img)?;
+                            std::fs::copy(&src, a.img.join(to))
+                                .with_context(|| format!("copying {}", src.display()))?;
+                        }
+                    }
+                }
                 let d = read(Path::new(&json))?;
                 let pct = |k: &str| {
                     d[k].as_f64()
@@ -503,13 +525,28 @@ pub fn run(a: &Args, dispatch: &dyn Fn(&[String]) -> anyhow::Result<()>) -> anyh
                 };
                 writeln!(
                     md,
-                    "| {map_label} | {label} | {} | {} | {} / {} / {} | {} | {} | {} | {} | {} / {} | {} | {} / {} | {} |",
+                    "| {map_label} | {label} | {} | {} | {} / {} / {} | {} | {} ({}) | {} | {} | {} | {} / {} | {} | {} / {} | {} |",
                     if hazard { "yes" } else { "no" },
                     d["runs"],
                     f(&d, "landing_err_p50_m", 2),
                     f(&d, "landing_err_p95_m", 2),
                     f(&d, "landing_err_max_m", 2),
-                    pct("safe_landing_frac"),
+                    {
+                        // Where the unsafe touchdowns came from: a spot the map passed that the
+                        // truth calls unsafe, or a safe spot the lander missed.
+                        let (m, d) = (
+                            d["unsafe_on_unsafe_site"].as_u64().unwrap_or(0),
+                            d["unsafe_on_safe_site"].as_u64().unwrap_or(0),
+                        );
+                        let safe = pct("safe_landing_frac");
+                        if hazard && m + d > 0 {
+                            format!("{safe} ({m} on an unsafe spot, {d} off a safe one)")
+                        } else {
+                            safe
+                        }
+                    },
+                    pct("open_zone_safe_frac"),
+                    d["open_zone_runs"],
                     pct("target_area_safe_frac"),
                     if hazard {
                         format!(

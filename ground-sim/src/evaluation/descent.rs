@@ -46,10 +46,13 @@ pub struct HazardPicture {
     pub step_px: f32,
     /// The aim after this map, frame pixels.
     pub aim_px: [f32; 2],
-    /// The original target, frame pixels.
+    /// The original target (a confirmation: the aim before it), frame pixels.
     pub target_px: [f32; 2],
     /// Frame pixel, m.
     pub pixel_m: f64,
+    /// A confirmation map (a window around the chosen aim) rather than the first map.
+    #[serde(default)]
+    pub confirmation: bool,
 }
 
 /// Heights written by serde_json (NaN as `null`) read back.
@@ -324,10 +327,21 @@ pub struct RunResult {
     /// Largest height above or below that plane in the footprint (truth), m.
     #[serde(default, deserialize_with = "f64_or_nan")]
     pub touchdown_relief_m: f64,
+    /// Whether the spot aimed at (the chosen site, truth) is itself safe: an unsafe touchdown on
+    /// a safe site is the lander's dispersion, on an unsafe one the map's miss.
+    #[serde(default)]
+    pub site_safe: Option<bool>,
+    /// Relief of the truth under the spot aimed at, m.
+    #[serde(default, deserialize_with = "f64_or_nan")]
+    pub site_relief_m: f64,
     /// Fraction of safe sites within [`TARGET_AREA_RADIUS_M`] of the target (1 m lattice, truth):
     /// the chance of a safe touchdown for a lander that does not look.
     #[serde(default, deserialize_with = "f64_or_nan")]
     pub target_area_safe_frac: f64,
+    /// Fraction of safe sites within the site choice's reach of the target
+    /// ([`HazardConfig::max_reach_m`], truth): the landing zone the lander can choose from.
+    #[serde(default, deserialize_with = "f64_or_nan")]
+    pub reach_safe_frac: f64,
     /// Distance from the target to the spot finally aimed at (the chosen safe site; 0 without
     /// a choice), m, truth.
     #[serde(default, deserialize_with = "f64_or_nan")]
@@ -347,9 +361,9 @@ pub struct RunResult {
     /// Confirmation maps that moved the aim.
     #[serde(default)]
     pub confirm_moves: usize,
-    /// The last hazard map (pictured run only).
+    /// The last hazard map, then the last confirmation map (pictured run only).
     #[serde(skip)]
-    pub hazard_picture: Option<HazardPicture>,
+    pub hazard_pictures: Vec<HazardPicture>,
     /// Height above terrain of the last accepted measurement (fix or offset), m.
     #[serde(default, deserialize_with = "f64_or_nan")]
     pub last_aid_agl_m: f64,
@@ -415,9 +429,10 @@ pub struct DescentRecord {
     pub totals: HistoryTotals,
     /// The history itself, kept for run 0 only (its pictures).
     pub history: Option<Vec<Sample>>,
-    /// Run 0's last hazard map (its picture), so merged shards draw it too.
+    /// Run 0's last hazard and confirmation maps (their pictures), so merged shards draw them
+    /// too.
     #[serde(default)]
-    pub hazard_picture: Option<HazardPicture>,
+    pub hazard_pictures: Vec<HazardPicture>,
 }
 
 impl DescentRecord {
@@ -425,12 +440,12 @@ impl DescentRecord {
     pub fn new(mut r: RunResult, keep_history: bool) -> Self {
         let totals = HistoryTotals::of(&r.history);
         let history = std::mem::take(&mut r.history);
-        let hazard = r.hazard_picture.take();
+        let hazard = std::mem::take(&mut r.hazard_pictures);
         Self {
             result: r,
             totals,
             history: keep_history.then_some(history),
-            hazard_picture: hazard.filter(|_| keep_history),
+            hazard_pictures: if keep_history { hazard } else { Vec::new() },
         }
     }
 }
@@ -525,11 +540,14 @@ pub fn fly(
         hazard_no_site: 0,
         confirm_maps: 0,
         confirm_moves: 0,
-        hazard_picture: None,
+        hazard_pictures: Vec::new(),
         touchdown_safe: None,
         touchdown_slope_deg: f64::NAN,
         touchdown_relief_m: f64::NAN,
+        site_safe: None,
+        site_relief_m: f64::NAN,
         target_area_safe_frac: f64::NAN,
+        reach_safe_frac: f64::NAN,
         nees_in_band_frac: f64::NAN,
         nees_mean: f64::NAN,
         final_samples: 0,
@@ -543,7 +561,8 @@ pub fn fly(
     let mut hazards = Box::new(GroundHazardMap::new());
     // Where guidance flies to (estimate space) and where that spot truly is.
     let (mut aim, mut aim_truth) = (target, target);
-    let mut last_hazard = None;
+    // Last map and last confirmation, pictured.
+    let (mut last_hazard, mut last_confirm) = (None, None);
     // The pictured run keeps its last hazard map.
     let keep_history = run == 0;
     // One decision: the first map that keeps the aim or finds a site fixes it. Later, finer
@@ -879,7 +898,7 @@ pub fn fly(
                             }
                         }
                         if keep_history {
-                            last_hazard = Some(HazardPicture {
+                            let pic = Some(HazardPicture {
                                 heights_m: frame.heights_m.clone(),
                                 width: w,
                                 height: hh,
@@ -897,15 +916,15 @@ pub fn fly(
                                     w,
                                     hh,
                                 ),
-                                target_px: en_to_frame_px(
-                                    [target[0] - pe[0], target[1] - pe[1]],
-                                    h_est,
-                                    pixel_m,
-                                    w,
-                                    hh,
-                                ),
+                                target_px,
                                 pixel_m,
+                                confirmation: confirm_due,
                             });
+                            if confirm_due {
+                                last_confirm = pic;
+                            } else {
+                                last_hazard = pic;
+                            }
                         }
                     }
                 }
@@ -937,7 +956,7 @@ pub fn fly(
     let pe = filt.position_m();
     out.landing_err_m = (p[0] - aim_truth[0]).hypot(p[1] - aim_truth[1]);
     out.site_from_target_m = (aim_truth[0] - target[0]).hypot(aim_truth[1] - target[1]);
-    out.hazard_picture = last_hazard;
+    out.hazard_pictures = last_hazard.into_iter().chain(last_confirm).collect();
     if let Some(zone) = terrain.zone {
         let t = SafetyThresholds::default();
         if let Some(s) = site_safety(zone, p[0], p[1], &t) {
@@ -945,7 +964,13 @@ pub fn fly(
             out.touchdown_slope_deg = s.slope_deg;
             out.touchdown_relief_m = s.relief_m;
         }
+        if let Some(s) = site_safety(zone, aim_truth[0], aim_truth[1], &t) {
+            out.site_safe = Some(s.safe);
+            out.site_relief_m = s.relief_m;
+        }
         out.target_area_safe_frac = area_safe_fraction(zone, target, TARGET_AREA_RADIUS_M, &t);
+        out.reach_safe_frac =
+            area_safe_fraction(zone, target, f64::from(cfg.hazard.max_reach_m), &t);
     }
     out.nav_err_at_landing_m = (p[0] - pe[0]).hypot(p[1] - pe[1]);
     out.unaided_s = out.flight_s - out.unaided_s;
