@@ -162,4 +162,18 @@ fn tile_trn_eval_and_descent_on_a_generated_scene() {
     assert_eq!(s["touchdowns_judged"], 2, "{s}");
     assert!(s["last_aid_agl_p50_m"].as_f64().unwrap() < 200.0, "{s}");
     assert!(dir.path().join("descent-trajectory.png").exists());
+    // Each run maps its landing zone; a run that chose a site confirms it on a finer frame.
+    // Unsafe touchdowns are all accounted for, on an unsafe spot or off a safe one.
+    assert!(s["hazard_maps"].as_u64().unwrap() >= 2, "{s}");
+    if s["runs_retargeted"].as_u64().unwrap() > 0 {
+        assert!(s["confirm_maps"].as_u64().unwrap() >= 1, "{s}");
+    }
+    let unsafe_runs = (2.0 * (1.0 - s["safe_landing_frac"].as_f64().unwrap())).round() as u64;
+    assert_eq!(
+        s["unsafe_on_unsafe_site"].as_u64().unwrap() + s["unsafe_on_safe_site"].as_u64().unwrap(),
+        unsafe_runs,
+        "{s}"
+    );
+    assert!(s["open_zone_runs"].as_u64().unwrap() <= 2, "{s}");
+    assert!(dir.path().join("descent-hazard.png").exists());
 }
