@@ -12,9 +12,7 @@
 use crate::flight::{HazardMap, Keyframe, Workspace};
 use crate::msg::{FrameHeader, FrameJob};
 use nav_core::frame::FrameError;
-use nav_core::hazard::{
-    AimDecision, CONFIRM_HALF_WINDOW_M, HazardConfig, HazardError, HazardStats,
-};
+use nav_core::hazard::{AimDecision, HazardConfig, HazardError, HazardStats};
 use nav_core::odometry::{KeyframePose, OdometryError, OdometryReport, locate_on_keyframe};
 use nav_core::{DemPatch, FrameReport, NavError, Navigator};
 
@@ -133,17 +131,11 @@ pub fn execute(
                 Err(e) => HazardOutcome::Refused(e),
             })
         }
-        (Ok(d), FrameJob::Confirm(aim)) => {
-            let cfg = HazardConfig::confirmation();
-            JobOutput::Hazard(
-                match fp
-                    .hazards
-                    .build_around(d, &cfg, *aim, CONFIRM_HALF_WINDOW_M)
-                {
-                    Ok(stats) => HazardOutcome::Map(stats, fp.hazards.decide(*aim, *aim, &cfg)),
-                    Err(e) => HazardOutcome::Refused(e),
-                },
-            )
-        }
+        (Ok(d), FrameJob::Confirm(aim)) => JobOutput::Hazard(
+            match fp.hazards.confirm(d, &HazardConfig::confirmation(), *aim) {
+                Ok((stats, decision)) => HazardOutcome::Map(stats, decision),
+                Err(e) => HazardOutcome::Refused(e),
+            },
+        ),
     }
 }

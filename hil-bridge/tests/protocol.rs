@@ -27,6 +27,21 @@ fn hex(s: &str) -> Vec<u8> {
 
 const CHUNK_DATA: [u8; 8] = [0x00, 0x00, 0x80, 0x3f, 0x00, 0x00, 0x20, 0xc1];
 
+/// A confirmation frame's header (protocol v5's new job): a golden vector and a round trip.
+fn confirm_header() -> Message<'static> {
+    Message::FrameHeader(FrameHeader {
+        frame_id: 14,
+        width: 200,
+        height: 200,
+        pixel_m: 0.25,
+        format: SampleFormat::HeightF32Le,
+        payload_bytes: 160_000,
+        payload_crc: 5,
+        prior: None,
+        job: FrameJob::Confirm([125.0, 115.0]),
+    })
+}
+
 fn golden() -> Vec<(u16, Message<'static>, &'static str)> {
     vec![
         (
@@ -82,17 +97,7 @@ fn golden() -> Vec<(u16, Message<'static>, &'static str)> {
         (6, Message::Shutdown, "00 02 06 06 0b 28 7c 1e 6c 00"),
         (
             7,
-            Message::FrameHeader(FrameHeader {
-                frame_id: 14,
-                width: 200,
-                height: 200,
-                pixel_m: 0.25,
-                format: SampleFormat::HeightF32Le,
-                payload_bytes: 160_000,
-                payload_crc: 5,
-                prior: None,
-                job: FrameJob::Confirm([125.0, 115.0]),
-            }),
+            confirm_header(),
             "00 02 07 07 02 0e c8 01 c8 01 01 03 80 3e 05 80 e2 09 05 02 04 01 03 fa 42 01 07 e6 42 4d ed 8f 34 00",
         ),
     ]
@@ -299,17 +304,7 @@ fn every_message() -> Vec<Message<'static>> {
                 target_px: [125.0, 115.0],
             }),
         }),
-        Message::FrameHeader(FrameHeader {
-            frame_id: 14,
-            width: 200,
-            height: 200,
-            pixel_m: 0.25,
-            format: SampleFormat::HeightF32Le,
-            payload_bytes: 160_000,
-            payload_crc: 5,
-            prior: None,
-            job: FrameJob::Confirm([125.0, 115.0]),
-        }),
+        confirm_header(),
         Message::FrameCost(FrameCost {
             frame_id: 3,
             window: 2,

@@ -554,6 +554,21 @@ impl<const N: usize> HazardMap<N> {
         }
     }
 
+    /// Confirm the chosen aim at `aim_px` (frame pixels) on a finer frame: map the window of
+    /// [`CONFIRM_HALF_WINDOW_M`] around it under `cfg` (the flight uses
+    /// [`HazardConfig::confirmation`]) and [`Self::decide`] with the aim as its own target, so a
+    /// move stays within `cfg.max_reach_m` of it. The one definition the descent and the target
+    /// both run.
+    pub fn confirm(
+        &mut self,
+        dem: &DemPatch<'_>,
+        cfg: &HazardConfig,
+        aim_px: [f32; 2],
+    ) -> Result<(HazardStats, AimDecision), HazardError> {
+        let stats = self.build_around(dem, cfg, aim_px, CONFIRM_HALF_WINDOW_M)?;
+        Ok((stats, self.decide(aim_px, aim_px, cfg)))
+    }
+
     /// The one decision a map makes for guidance: keep the aim at `aim_px` (frame pixels) if
     /// its site has at least `cfg.clearance_m`; else move it: an aim that is safe but tight
     /// moves only to a site with that clearance ([`Self::nearest_with`] around `target_px`),

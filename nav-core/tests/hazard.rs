@@ -222,11 +222,13 @@ fn a_window_judges_its_sites_as_the_whole_frame_does() {
     // The window reaches its edge sites: one step more would leave it.
     let last = part.site_px(cols - 1, rows - 1);
     assert!((last[0] + step - centre[0]) * PX > CONFIRM_HALF_WINDOW_M);
-    // The rock under the aim moves it, within the confirmation's reach.
+    // The rock under the aim moves it, within the confirmation's reach: `confirm` is the
+    // window map and the decision with the aim as its own target.
     let on_rock = [c / PX; 2];
-    part.build_around(&dem, &cfg, on_rock, CONFIRM_HALF_WINDOW_M)
-        .unwrap();
-    match part.decide(on_rock, on_rock, &cfg) {
+    let (stats, decision) = part.confirm(&dem, &cfg, on_rock).unwrap();
+    assert!(stats.too_rough > 0, "{stats:?}");
+    assert_eq!(decision, part.decide(on_rock, on_rock, &cfg));
+    match decision {
         AimDecision::Move(site) => {
             assert!(site.from_target_m <= cfg.max_reach_m, "{site:?}");
             assert!(site.clearance_m >= cfg.clearance_m, "{site:?}");

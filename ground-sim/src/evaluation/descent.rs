@@ -10,7 +10,7 @@
 use nav_core::filter::{
     FilterConfig, FixMeasurement, InitialState, NavFilter, OffsetMeasurement, UpdateOutcome,
 };
-use nav_core::hazard::{AimDecision, CONFIRM_HALF_WINDOW_M, CONFIRM_MAX_PIXEL_M, HazardConfig};
+use nav_core::hazard::{AimDecision, CONFIRM_MAX_PIXEL_M, HazardConfig};
 use nav_core::odometry::KeyframePose;
 use nav_core::{Navigator, Prior};
 use rand::{RngExt, SeedableRng};
@@ -847,40 +847,37 @@ pub fn fly(
                     let (w, hh) = (frame.width, frame.height);
                     let aim_now =
                         en_to_frame_px([aim[0] - pe[0], aim[1] - pe[1]], h_est, pixel_m, w, hh);
-                    // The confirmation judges a window around the aim and may move it only a
-                    // few metres from there: the aim is its own target.
-                    let (hz_cfg, built, decide_target) = if confirm_due {
-                        let c = cfg.hazard_confirm_cfg;
-                        let b = hazards.build_around(&dem, &c, aim_now, CONFIRM_HALF_WINDOW_M);
-                        (c, b, Some(aim_now))
+                    // One decision, as the target makes it (`HazardMap::decide`): the first
+                    // map keeps an aim safe with its clearance, else moves it near the target;
+                    // the confirmation (`HazardMap::confirm`) maps the window around the aim
+                    // and moves it only a few metres from there.
+                    let target_px = en_to_frame_px(
+                        [target[0] - pe[0], target[1] - pe[1]],
+                        h_est,
+                        pixel_m,
+                        w,
+                        hh,
+                    );
+                    let made = if confirm_due {
+                        hazards.confirm(&dem, &cfg.hazard_confirm_cfg, aim_now)
                     } else {
-                        (cfg.hazard, hazards.build(&dem, &cfg.hazard), None)
+                        hazards
+                            .build(&dem, &cfg.hazard)
+                            .map(|stats| (stats, hazards.decide(aim_now, target_px, &cfg.hazard)))
                     };
-                    if built.is_ok() {
+                    if let Ok((_, decision)) = made {
                         if confirm_due {
                             out.confirm_maps += 1;
                         } else {
                             out.hazard_maps += 1;
                         }
-                        // One decision (`HazardMap::decide`, as the target makes it): keep an
-                        // aim that is safe with its clearance, else move it near the target.
-                        let aim_px = aim_now;
-                        let target_px = decide_target.unwrap_or_else(|| {
-                            en_to_frame_px(
-                                [target[0] - pe[0], target[1] - pe[1]],
-                                h_est,
-                                pixel_m,
-                                w,
-                                hh,
-                            )
-                        });
-                        match hazards.decide(aim_px, target_px, &hz_cfg) {
+                        match decision {
                             AimDecision::Keep { .. } => {
-                                confirmed = site_chosen;
+                                confirmed |= confirm_due;
                                 site_chosen = true;
                             }
                             AimDecision::Move(site) => {
-                                if site_chosen {
+                                if confirm_due {
                                     confirmed = true;
                                     out.confirm_moves += 1;
                                 }
@@ -916,7 +913,8 @@ pub fn fly(
                                     w,
                                     hh,
                                 ),
-                                target_px,
+                                // A confirmation's "before" is the aim it was given.
+                                target_px: if confirm_due { aim_now } else { target_px },
                                 pixel_m,
                                 confirmation: confirm_due,
                             });
