@@ -179,6 +179,7 @@ pub fn run_demo(a: &Args) -> anyhow::Result<DemoSummary> {
         sar: Some(SarSummary::of(&pair)),
         input_dem: Some(dem_path.clone()),
         filled_nodata: filled,
+        blocks: None,
     };
     let insar = write_outputs(&insar_dir, &product, &truth_grid, &ctx)?;
     let acc = &insar.accuracy;

@@ -11,7 +11,7 @@ use ground_sim::insar::pipeline::{
     LookDirections, process_simulated, process_slcs, run_from_dem_looks,
 };
 use ground_sim::insar::products::{InsarReport, RunContext, SarSummary, write_outputs};
-use ground_sim::insar::{InsarConfig, label};
+use ground_sim::insar::{InsarConfig, blocks, label};
 use ground_sim::sar::cli::RadarArgs;
 use ground_sim::sar::pipeline::{SimOptions, simulate_with};
 use ground_sim::sar::{Polarisation, SarDem, Slc};
@@ -62,6 +62,22 @@ pub struct Args {
     /// Hide progress bars.
     #[arg(long)]
     pub no_progress: bool,
+    /// Largest core block side, output cells: a map wider or taller than this is made in
+    /// overlapping blocks (each simulated and processed alone, memory bounded by the block,
+    /// then mosaicked); 0 = always one piece.
+    #[arg(long, default_value_t = blocks::DEFAULT_BLOCK_CELLS)]
+    pub block_cells: usize,
+    /// Margin added to each side of a block, output cells.
+    #[arg(long, default_value_t = blocks::DEFAULT_OVERLAP_CELLS)]
+    pub block_overlap_cells: usize,
+    /// Make only block I of N (0-based, e.g. a Slurm array task) into OUT/blocks/ and stop;
+    /// N must be the map's block count. `--mosaic` then joins them.
+    #[arg(long, value_name = "I/N", conflicts_with = "mosaic")]
+    pub block: Option<ground_sim::evaluation::shard::Shard>,
+    /// Join the blocks already in OUT/blocks/ (made with the same DEM and flags) into the map
+    /// products, without simulating anything.
+    #[arg(long)]
+    pub mosaic: bool,
 }
 
 /// The radar configuration of an InSAR run: `RadarArgs` resolved as for `sar`, but only the
@@ -78,8 +94,16 @@ pub fn radar_config(r: &RadarArgs) -> anyhow::Result<(ground_sim::sar::SarConfig
     Ok((sar, pol))
 }
 
-/// Run the chain as `args` says; returns the report (also written to `OUT/report.json`).
-pub fn run_chain(a: &Args) -> anyhow::Result<InsarReport> {
+/// What an `insar` run made.
+pub enum Outcome {
+    /// The map and its report (also written to `OUT/report.json`).
+    Map(Box<InsarReport>),
+    /// One block of a map in blocks (`--block I/N`), written to `OUT/blocks/`.
+    Block(Box<blocks::BlockRecord>),
+}
+
+/// Run the chain as `args` says.
+pub fn run_chain(a: &Args) -> anyhow::Result<Outcome> {
     let (sar, pol) = radar_config(&a.radar)?;
     let cfg = InsarConfig {
         pixel_m: a.pixel_m,
@@ -96,6 +120,33 @@ pub fn run_chain(a: &Args) -> anyhow::Result<InsarReport> {
         input_dem: Some(a.dem.clone()),
         ..RunContext::default()
     };
+    let layout = blocks::layout_for(&truth, cfg.pixel_m, a.block_cells, a.block_overlap_cells)?;
+    if let Some(layout) = layout {
+        anyhow::ensure!(
+            a.looks == LookDirections::One,
+            "--looks both is not made in blocks yet: give --block-cells 0 (one piece) for it"
+        );
+        anyhow::ensure!(
+            a.slc_dir.is_none(),
+            "--slc-dir holds one pass of the whole scene; a map in blocks simulates its blocks \
+             itself (give --block-cells 0 to process those SLCs in one piece)"
+        );
+        let job = blocks::BlockJob {
+            truth: &truth,
+            sar: &sar,
+            pol,
+            cfg: &cfg,
+            layout,
+            out: &a.out,
+            progress: !a.no_progress,
+        };
+        return run_blocks(a, &job, ctx);
+    }
+    anyhow::ensure!(
+        a.block.is_none() && !a.mosaic,
+        "this map fits one block of {} cells (--block-cells): nothing to split or join",
+        a.block_cells
+    );
     let (truth, product) = match &a.slc_dir {
         Some(_) if a.looks == LookDirections::Both => {
             anyhow::bail!(
@@ -130,7 +181,47 @@ pub fn run_chain(a: &Args) -> anyhow::Result<InsarReport> {
             process_simulated(&truth, &pair, pol, &cfg)?
         }
     };
-    write_outputs(&a.out, &product, &truth, &ctx)
+    write_outputs(&a.out, &product, &truth, &ctx).map(|r| Outcome::Map(Box::new(r)))
+}
+
+fn run_blocks(
+    a: &Args,
+    job: &blocks::BlockJob<'_>,
+    mut ctx: RunContext,
+) -> anyhow::Result<Outcome> {
+    let n = job.layout.count();
+    if let Some(b) = a.block {
+        anyhow::ensure!(
+            b.count == n,
+            "--block {}/{}: this map is cut into {n} blocks ({}×{} of ≤ {} cells), so N must be {n}",
+            b.index,
+            b.count,
+            job.layout.rows,
+            job.layout.cols,
+            job.layout.block_cells
+        );
+        let r = blocks::run_block(job, b.index)?;
+        return Ok(Outcome::Block(Box::new(r)));
+    }
+    if !a.mosaic {
+        let pb = if a.no_progress {
+            indicatif::ProgressBar::hidden()
+        } else {
+            super::progress(n as u64, "blocks")
+        };
+        for i in 0..n {
+            blocks::run_block(job, i)?;
+            pb.inc(1);
+        }
+        pb.finish_and_clear();
+    }
+    let m = blocks::mosaic(job)?;
+    ctx.sar = Some(m.sar.clone());
+    ctx.filled_nodata = m.filled_nodata;
+    let mut report = m.report;
+    report.peak_rss_mib = blocks::peak_rss_mib();
+    ctx.blocks = Some(report);
+    write_outputs(&a.out, &m.product, &m.truth, &ctx).map(|r| Outcome::Map(Box::new(r)))
 }
 
 /// Print the report's headline figures.
@@ -205,6 +296,31 @@ pub fn print_report(r: &InsarReport, out: &Path) {
         "unwrap     phase span {:.2} rad = {:.0} m of height (ambiguity {:.0} m); {} px changed",
         u.phase_span_rad, u.height_span_m, u.ambiguity_height_m, u.pixels_changed
     );
+    if let Some(b) = &r.blocks {
+        let l = &b.layout;
+        println!(
+            "blocks     {}x{} blocks of <= {} cells (+{} each side); seams: {} cells compared, \
+             difference RMS {:.2} m, max {:.2} m, {} whole-cycle",
+            l.rows,
+            l.cols,
+            l.block_cells,
+            l.overlap_cells,
+            b.overlap_cells_compared,
+            b.overlap_height_diff_rms_m,
+            b.overlap_height_diff_max_m,
+            b.overlap_cycle_disagreements
+        );
+        println!(
+            "           height RMSE in the blend zones {:.2} m ({} cells), elsewhere {:.2} m ({} cells); peak RSS {}",
+            b.height_rmse_blend_zone_m,
+            b.valid_cells[0],
+            b.height_rmse_elsewhere_m,
+            b.valid_cells[1],
+            b.peak_rss_mib
+                .map(|m| format!("{m:.0} MiB"))
+                .unwrap_or_else(|| "unknown".into())
+        );
+    }
     println!(
         "tile       {} features; InSAR {:.2} s{}",
         r.tile_features,
@@ -218,7 +334,24 @@ pub fn print_report(r: &InsarReport, out: &Path) {
 
 /// Run `ground-sim insar`.
 pub fn run(a: &Args) -> anyhow::Result<()> {
-    let r = run_chain(a)?;
+    let r = match run_chain(a)? {
+        Outcome::Map(r) => r,
+        Outcome::Block(r) => {
+            let n = r.layout.count();
+            println!(
+                "block {}/{n} ({}x{} cells) -> {}: valid {:.1} %, SAR {:.1} s, InSAR {:.1} s; \
+                 when all {n} are made, join them with the same flags and --mosaic",
+                r.block.index,
+                r.block.extent.width(),
+                r.block.extent.height(),
+                blocks::block_dir(&a.out, r.block.index).display(),
+                100.0 * r.mask.valid,
+                r.sar_timings.total_s,
+                r.insar_s
+            );
+            return Ok(());
+        }
+    };
     print_report(&r, &a.out);
     if r.tile_features == 0 {
         eprintln!("warning: the reference tile has no features (too small or too noisy a DEM)");

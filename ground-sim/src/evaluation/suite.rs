@@ -328,6 +328,7 @@ pub fn run_scene(
                     sar: Some(SarSummary::of(&run.pair)),
                     input_dem: Some(dir.join("dem.tif")),
                     filled_nodata: run.filled_nodata,
+                    blocks: None,
                 };
                 let r = write_outputs(&tdir, &run.product, &run.truth, &ctx)?;
                 report.insar_height_rmse_m = Some(r.accuracy.height_rmse_m);

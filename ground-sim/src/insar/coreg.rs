@@ -62,7 +62,7 @@ pub fn resample_range(
 }
 
 /// Result of the coherence search for a residual range offset.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ResidualOffset {
     /// Residual offset on top of the geometric prediction that maximises the mean coherence,
     /// gates (parabolic peak of the trial grid).

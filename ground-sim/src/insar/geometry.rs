@@ -14,7 +14,7 @@ use super::{InsarError, InsarResult};
 use crate::sar::Slc;
 
 /// Baseline, datum and range axis shared by the two SLCs of a pair.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct PairGeometry {
     /// `(y, z)` of antenna A1's track, m.
     pub a1_yz_m: [f64; 2],

@@ -26,6 +26,7 @@
 //! lunar datum of the input DEM. Conventions and measured figures: `docs/insar.md`.
 
 pub mod accuracy;
+pub mod blocks;
 pub mod coreg;
 pub mod geocode;
 pub mod geometry;

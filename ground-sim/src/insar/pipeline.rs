@@ -5,7 +5,7 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use super::coreg::{
     ResidualOffset, estimate_residual_offset, predicted_offset_gates, resample_range,
@@ -122,7 +122,7 @@ impl InsarConfig {
 }
 
 /// Coregistration figures.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct CoregReport {
     /// Predicted A2 − A1 offset at the first gate, gates.
     pub offset_near_gates: f64,
@@ -133,7 +133,7 @@ pub struct CoregReport {
 }
 
 /// Unwrapping figures.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct UnwrapReport {
     /// Whether unwrapping ran.
     pub ran: bool,
@@ -151,7 +151,7 @@ pub struct UnwrapReport {
 }
 
 /// Fractions of the output grid per mask code.
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 pub struct MaskFractions {
     /// Valid heights.
     pub valid: f64,
@@ -166,7 +166,8 @@ pub struct MaskFractions {
 }
 
 impl MaskFractions {
-    fn of(labels: &[u8]) -> Self {
+    /// Fractions of `labels` per code.
+    pub fn of(labels: &[u8]) -> Self {
         let n = labels.len().max(1) as f64;
         let f = |l: u8| labels.iter().filter(|&&x| x == l).count() as f64 / n;
         Self {

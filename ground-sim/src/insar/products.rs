@@ -107,6 +107,9 @@ pub struct InsarReport {
     pub products_s: f64,
     /// Files written (relative to the folder).
     pub files: Vec<String>,
+    /// The map was made in blocks (`insar --block-cells`): layout, seams, per-block figures.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub blocks: Option<crate::insar::blocks::MosaicReport>,
 }
 
 /// Context of the run for the report.
@@ -118,6 +121,8 @@ pub struct RunContext {
     pub input_dem: Option<PathBuf>,
     /// Nodata heights filled before the radar simulation.
     pub filled_nodata: usize,
+    /// The map was made in blocks: how they joined.
+    pub blocks: Option<crate::insar::blocks::MosaicReport>,
 }
 
 fn save(img: &image::RgbImage, path: &Path) -> anyhow::Result<()> {
@@ -200,51 +205,55 @@ pub fn write_outputs(
         Ok(())
     };
     let radar_px = r.line_spacing_m;
-    png(
-        raster_image(
-            &r.phase_with_flat_rad,
-            r.cols,
-            r.lines,
-            radar_px,
-            &RasterStyle {
-                title: "Fig 5a: phase with flat-Moon term",
-                map: ColourMap::Phase,
-                range: (-pi, pi),
-                unit: "rad",
-            },
-        ),
-        "fig5a-phase-with-flat.png",
-    )?;
-    png(
-        raster_image(
-            &r.phase_rad,
-            r.cols,
-            r.lines,
-            radar_px,
-            &RasterStyle {
-                title: "Fig 5b: phase, flat-Moon term removed",
-                map: ColourMap::Phase,
-                range: (-pi, pi),
-                unit: "rad",
-            },
-        ),
-        "fig5b-phase-flat-removed.png",
-    )?;
-    png(
-        raster_image(
-            &r.coherence,
-            r.cols,
-            r.lines,
-            radar_px,
-            &RasterStyle {
-                title: "coherence (radar geometry)",
-                map: ColourMap::Grey,
-                range: (0.0, 1.0),
-                unit: "",
-            },
-        ),
-        "coherence-radar.png",
-    )?;
+    // A map made in blocks has no radar geometry of its own (each block has its own).
+    let radar_pictures = r.lines > 0 && r.cols > 0;
+    if radar_pictures {
+        png(
+            raster_image(
+                &r.phase_with_flat_rad,
+                r.cols,
+                r.lines,
+                radar_px,
+                &RasterStyle {
+                    title: "Fig 5a: phase with flat-Moon term",
+                    map: ColourMap::Phase,
+                    range: (-pi, pi),
+                    unit: "rad",
+                },
+            ),
+            "fig5a-phase-with-flat.png",
+        )?;
+        png(
+            raster_image(
+                &r.phase_rad,
+                r.cols,
+                r.lines,
+                radar_px,
+                &RasterStyle {
+                    title: "Fig 5b: phase, flat-Moon term removed",
+                    map: ColourMap::Phase,
+                    range: (-pi, pi),
+                    unit: "rad",
+                },
+            ),
+            "fig5b-phase-flat-removed.png",
+        )?;
+        png(
+            raster_image(
+                &r.coherence,
+                r.cols,
+                r.lines,
+                radar_px,
+                &RasterStyle {
+                    title: "coherence (radar geometry)",
+                    map: ColourMap::Grey,
+                    range: (0.0, 1.0),
+                    unit: "",
+                },
+            ),
+            "coherence-radar.png",
+        )?;
+    }
     let (w, h) = (p.grid.width, p.grid.height);
     let (zlo, zhi) = truth_grid
         .heights_m()
@@ -362,6 +371,7 @@ pub fn write_outputs(
             f.push(REPORT_FILE.to_string());
             f
         },
+        blocks: ctx.blocks.clone(),
     };
     let text = serde_json::to_string_pretty(&report)? + "\n";
     std::fs::write(dir.join(REPORT_FILE), text)

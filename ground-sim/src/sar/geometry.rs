@@ -248,12 +248,28 @@ pub struct Geometry {
 impl Geometry {
     /// Place the track so the DEM centre is seen at θ0 from `H` above the DEM mean height.
     pub fn new(dem: &SarDem, cfg: &SarConfig, derived: &Derived) -> SarResult<Self> {
-        let theta = cfg.incidence_centre_deg.to_radians();
         let xc = dem.origin_m[0] + 0.5 * (dem.height - 1) as f64 * dem.pixel_m;
         let yc = dem.origin_m[1] + 0.5 * (dem.width - 1) as f64 * dem.pixel_m;
         let zref = dem.mean_height_m();
+        Self::in_scene(dem, cfg, derived, [xc, yc, zref])
+    }
+
+    /// Place the track for `scene_centre_m` (a whole scene's centre on its mean height, seen at
+    /// θ0 from `H` above it) while `dem` is only part of that scene, e.g. one block of a map
+    /// processed in blocks: every block is then seen from the one track of the whole pass. The
+    /// processing datum (flat phase, focusing height) is `dem`'s own mean height, as a processor
+    /// with a coarse prior DEM would take it block by block.
+    pub fn in_scene(
+        dem: &SarDem,
+        cfg: &SarConfig,
+        derived: &Derived,
+        scene_centre_m: [f64; 3],
+    ) -> SarResult<Self> {
+        let theta = cfg.incidence_centre_deg.to_radians();
+        let [xc, yc, scene_z] = scene_centre_m;
+        let zref = dem.mean_height_m();
         let track_y_m = yc - cfg.altitude_m * theta.tan();
-        let track_z_m = zref + cfg.altitude_m;
+        let track_z_m = scene_z + cfg.altitude_m;
         let alpha = cfg.baseline_tilt_deg.to_radians();
         let zmax = dem
             .heights_m

@@ -9,7 +9,7 @@ use super::config::{Derived, Polarisation, SarConfig};
 use super::echo::{EchoSimulator, RawEcho, add_thermal_noise};
 use super::geometry::{AcquisitionPlan, Antenna, Geometry, SarDem};
 use super::rda::RdaProcessor;
-use super::scene::{SceneStats, build_facets, facet_scatterers};
+use super::scene::{SceneStats, build_facets, facet_scatterers_indexed};
 use super::slc::Slc;
 use super::{C32, MAX_POLARISATIONS, SarResult};
 
@@ -43,6 +43,35 @@ pub struct SimOptions {
     pub clutter_scale: f64,
     /// Point targets added to the scene.
     pub point_targets: Vec<PointTarget>,
+    /// The DEM is one block of a larger scene: place the track for that scene and draw each
+    /// facet's speckle by its place in the scene's mesh (`None`: the DEM is the scene).
+    pub scene: Option<SceneFrame>,
+}
+
+/// Where a block sits in the scene it belongs to ([`SimOptions::scene`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SceneFrame {
+    /// The whole scene's centre on its mean height, SAR frame, m (the track is placed for it).
+    pub centre_m: [f64; 3],
+    /// The block mesh's node (0, 0) as a node of the scene's mesh (row, column), and the
+    /// scene mesh's cells per row: facet `k` of cell `(r, c)` draws the speckle of scene facet
+    /// `2·((r + row)·cells_wide + c + col) + k`, so overlapping blocks see the same ground
+    /// alike.
+    pub mesh_offset: Option<MeshOffset>,
+    /// Seed of the block's thermal noise (blocks draw their own; the speckle stays the
+    /// scene's).
+    pub noise_seed: u64,
+}
+
+/// A block mesh's place in the scene mesh ([`SceneFrame::mesh_offset`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct MeshOffset {
+    /// Scene mesh row of the block's first row.
+    pub row: usize,
+    /// Scene mesh column of the block's first column.
+    pub col: usize,
+    /// Cells per row of the scene mesh (nodes − 1).
+    pub cells_wide: usize,
 }
 
 impl Default for SimOptions {
@@ -52,6 +81,7 @@ impl Default for SimOptions {
             method: EchoMethod::Fast,
             clutter_scale: 1.0,
             point_targets: Vec::new(),
+            scene: None,
         }
     }
 }
@@ -141,11 +171,27 @@ fn simulate_inner(
     let t_all = Instant::now();
     let derived = cfg.derived()?;
     let mesh = dem.resampled(cfg.mesh_spacing_m)?;
-    let geometry = Geometry::new(&mesh, cfg, &derived)?;
+    let geometry = match &opts.scene {
+        Some(s) => Geometry::in_scene(&mesh, cfg, &derived, s.centre_m)?,
+        None => Geometry::new(&mesh, cfg, &derived)?,
+    };
     let plan = AcquisitionPlan::new(&mesh, cfg, &derived, geometry)?;
     let geom = &plan.geometry;
     let facets = build_facets(&mesh, geom)?;
-    let (mut scat, stats) = facet_scatterers(&facets, geom, cfg, opts.clutter_scale);
+    let lattice = opts.scene.and_then(|s| s.mesh_offset);
+    let index = |i: usize| -> u64 {
+        match lattice {
+            Some(m) => {
+                let cells = mesh.width - 1;
+                let (cell, k) = (i / 2, i % 2);
+                let (r, c) = (cell / cells, cell % cells);
+                (2 * ((r + m.row) * m.cells_wide + c + m.col) + k) as u64
+            }
+            None => i as u64,
+        }
+    };
+    let (mut scat, stats) =
+        facet_scatterers_indexed(&facets, geom, cfg, opts.clutter_scale, &index);
     drop(facets);
     for t in &opts.point_targets {
         scat.push(geom, t.position_m, t.amplitude);
@@ -185,7 +231,7 @@ fn simulate_inner(
             EchoMethod::TimeDomain => sim.simulate_time_domain(&scat, antenna, yz)?,
         };
         if let Some(p) = raw_noise_power {
-            add_thermal_noise(&mut raw, p, cfg.seed);
+            add_thermal_noise(&mut raw, p, opts.scene.map_or(cfg.seed, |s| s.noise_seed));
         }
         pb.finish();
         echoes_s += t.elapsed().as_secs_f64();

@@ -287,6 +287,22 @@ pub fn facet_scatterers(
     cfg: &SarConfig,
     clutter_scale: f64,
 ) -> (Scatterers, SceneStats) {
+    facet_scatterers_indexed(facets, geom, cfg, clutter_scale, &|i| i as u64)
+}
+
+/// [`facet_scatterers`] with facet `i`'s speckle drawn as the scene's facet `index(i)` (a block
+/// of a larger scene numbers its facets as the scene does, so overlapping blocks agree).
+#[allow(
+    clippy::needless_range_loop,
+    reason = "one index walks parallel SoA arrays"
+)]
+pub fn facet_scatterers_indexed(
+    facets: &Facets,
+    geom: &Geometry,
+    cfg: &SarConfig,
+    clutter_scale: f64,
+    index: &(dyn Fn(usize) -> u64 + Sync),
+) -> (Scatterers, SceneStats) {
     let ev = TwoScaleModel::from_config(cfg).facet_evaluator();
     let n = facets.area_m2.len();
     let amps: Vec<Option<[C32; MAX_POLARISATIONS]>> = (0..n)
@@ -295,7 +311,7 @@ pub fn facet_scatterers(
             if facets.flags[i] & FLAG_SHADOW != 0 || clutter_scale == 0.0 {
                 return None;
             }
-            let g = complex_gaussian(cfg.seed, 0, i as u64);
+            let g = complex_gaussian(cfg.seed, 0, index(i));
             let gam = ev.reflectivity(facets.local_incidence_rad[i], facets.pol_rotation_rad[i], g);
             let s = clutter_scale * (facets.area_m2[i] / (4.0 * std::f64::consts::PI)).sqrt();
             let mut out = [C32::new(0.0, 0.0); MAX_POLARISATIONS];

@@ -1,0 +1,217 @@
+//! `ground-sim insar` in blocks: a map made block by block in separate processes and joined
+//! with `--mosaic` is the same bytes as the one-process run, its seams hold, and bad requests
+//! are refused with a reason.
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+fn exec(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_ground-sim"))
+        .args(args)
+        .output()
+        .expect("ground-sim runs")
+}
+
+fn run(args: &[&str]) -> String {
+    let out = exec(args);
+    let text = String::from_utf8_lossy(&out.stdout).to_string();
+    assert!(
+        out.status.success(),
+        "ground-sim {args:?} failed:\n{text}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    text
+}
+
+fn refused(args: &[&str]) -> String {
+    let out = exec(args);
+    assert!(!out.status.success(), "ground-sim {args:?} should fail");
+    String::from_utf8_lossy(&out.stderr).to_string()
+}
+
+fn refs(v: &[String]) -> Vec<&str> {
+    v.iter().map(String::as_str).collect()
+}
+
+fn path(p: &Path) -> &str {
+    p.to_str().expect("utf-8 temp path")
+}
+
+/// JSON with every timing (`*_s`) and memory figure removed: what must not differ between runs.
+fn without_timings(v: serde_json::Value) -> serde_json::Value {
+    match v {
+        serde_json::Value::Object(m) => m
+            .into_iter()
+            .filter(|(k, _)| !(k.ends_with("_s") || k == "peak_rss_mib"))
+            .map(|(k, v)| (k, without_timings(v)))
+            .collect(),
+        serde_json::Value::Array(a) => a.into_iter().map(without_timings).collect(),
+        other => other,
+    }
+}
+
+fn files(dir: &Path) -> Vec<std::path::PathBuf> {
+    let mut out = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                stack.push(p);
+            } else {
+                out.push(p.strip_prefix(dir).unwrap().to_path_buf());
+            }
+        }
+    }
+    out.sort();
+    out
+}
+
+#[test]
+fn blocks_in_separate_processes_mosaic_to_the_one_process_map() {
+    let dir = tempfile::tempdir().unwrap();
+    let dem = dir.path().join("dem.tif");
+    run(&[
+        "terrain",
+        "--preset",
+        "lola",
+        "--seed",
+        "5",
+        "--size-m",
+        "1600",
+        "--pixel-m",
+        "10",
+        "--out",
+        path(&dem),
+    ]);
+    let (one, blocked, split) = (
+        dir.path().join("one"),
+        dir.path().join("blocked"),
+        dir.path().join("split"),
+    );
+    let common = |out: &Path| -> Vec<String> {
+        [
+            "insar",
+            "--dem",
+            path(&dem),
+            "--out",
+            path(out),
+            "--no-progress",
+            "--block-cells",
+            "40",
+            "--block-overlap-cells",
+            "8",
+        ]
+        .iter()
+        .map(|s| s.to_string())
+        .collect()
+    };
+    let args = |v: &[String], extra: &[&str]| -> Vec<String> {
+        v.iter()
+            .cloned()
+            .chain(extra.iter().map(|s| s.to_string()))
+            .collect()
+    };
+
+    let text = run(&refs(&common(&blocked)));
+    assert!(text.contains("blocks     2x2 blocks"), "{text}");
+    // The same blocks, each in its own process, in reverse order, then joined.
+    for i in (0..4).rev() {
+        let b = format!("{i}/4");
+        let t = run(&refs(&args(&common(&split), &["--block", &b])));
+        assert!(t.contains(&format!("block {i}/4")), "{t}");
+    }
+    run(&refs(&args(&common(&split), &["--mosaic"])));
+    let (fa, fb) = (files(&blocked), files(&split));
+    assert_eq!(fa, fb, "the two runs wrote different files");
+    assert!(fa.iter().any(|f| f.ends_with("tile.bin")), "{fa:?}");
+    for f in &fa {
+        let (a, b) = (
+            std::fs::read(blocked.join(f)).unwrap(),
+            std::fs::read(split.join(f)).unwrap(),
+        );
+        if f.extension().is_some_and(|e| e == "json") {
+            let (ja, jb): (serde_json::Value, serde_json::Value) = (
+                serde_json::from_slice(&a).unwrap(),
+                serde_json::from_slice(&b).unwrap(),
+            );
+            assert_eq!(without_timings(ja), without_timings(jb), "{f:?} differs");
+        } else {
+            assert!(
+                a == b,
+                "{f:?} differs between the one-process and the split run"
+            );
+        }
+    }
+
+    // Seams: no whole-cycle disagreement, the blend zones as good as the rest, the mosaic as
+    // good as the map made in one piece.
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(blocked.join("report.json")).unwrap())
+            .unwrap();
+    let b = &report["blocks"];
+    let f = |v: &serde_json::Value| v.as_f64().unwrap();
+    assert_eq!(b["overlap_cycle_disagreements"], 0, "{b}");
+    assert!(b["overlap_cells_compared"].as_u64().unwrap() > 1000, "{b}");
+    let (zone, rest) = (
+        f(&b["height_rmse_blend_zone_m"]),
+        f(&b["height_rmse_elsewhere_m"]),
+    );
+    assert!(
+        zone <= 1.5 * rest,
+        "blend zones {zone} m vs elsewhere {rest} m"
+    );
+    run(&[
+        "insar",
+        "--dem",
+        path(&dem),
+        "--out",
+        path(&one),
+        "--no-progress",
+        "--block-cells",
+        "0",
+    ]);
+    let single: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(one.join("report.json")).unwrap()).unwrap();
+    let (mosaic_rmse, one_rmse) = (f(&report["height_rmse_m"]), f(&single["height_rmse_m"]));
+    assert!(
+        mosaic_rmse <= 1.3 * one_rmse + 0.2,
+        "mosaic {mosaic_rmse} m vs one piece {one_rmse} m"
+    );
+    assert!(
+        f(&report["valid_fraction"]) >= f(&single["valid_fraction"]) - 0.02,
+        "{report}"
+    );
+    assert!(report["tile_features"].as_u64().unwrap() > 0);
+    assert!(single.get("blocks").is_none());
+
+    // Refusals, each with its reason.
+    let e = refused(&refs(&args(&common(&split), &["--block", "0/3"])));
+    assert!(e.contains("N must be 4"), "{e}");
+    let e = refused(&refs(&args(&common(&split), &["--block", "4/4"])));
+    assert!(e.contains("out of range"), "{e}");
+    let empty = dir.path().join("empty");
+    let e = refused(&refs(&args(&common(&empty), &["--mosaic"])));
+    assert!(
+        e.contains("block 0 missing") && e.contains("--block 0/4"),
+        "{e}"
+    );
+    let e = refused(&refs(&args(
+        &common(&split),
+        &["--mosaic", "--min-coherence", "0.4"],
+    )));
+    assert!(e.contains("other settings"), "{e}");
+    let e = refused(&refs(&args(&common(&split), &["--looks", "both"])));
+    assert!(e.contains("--looks both"), "{e}");
+    let e = refused(&[
+        "insar",
+        "--dem",
+        path(&dem),
+        "--out",
+        path(&one),
+        "--no-progress",
+        "--block",
+        "0/1",
+    ]);
+    assert!(e.contains("fits one block"), "{e}");
+}
