@@ -2,6 +2,8 @@
 //! with `--mosaic` is the same bytes as the one-process run, its seams hold, and bad requests
 //! are refused with a reason.
 
+mod common;
+
 use std::path::Path;
 use std::process::{Command, Output};
 
@@ -27,6 +29,52 @@ fn refused(args: &[&str]) -> String {
     let out = exec(args);
     assert!(!out.status.success(), "ground-sim {args:?} should fail");
     String::from_utf8_lossy(&out.stderr).to_string()
+}
+
+/// `bash tools/SCRIPT ARGS...` with this build's binary, `bin_dir` (a stand-in `sbatch`) first
+/// on `PATH`.
+fn script(name: &str, args: &[&str], bin_dir: &Path) -> String {
+    let path = format!("{}:{}", bin_dir.display(), std::env::var("PATH").unwrap());
+    let o = Command::new("bash")
+        .arg(
+            Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("../tools")
+                .join(name),
+        )
+        .args(args)
+        .env("GROUND_SIM", env!("CARGO_BIN_EXE_ground-sim"))
+        .env("PATH", path)
+        .output()
+        .expect("bash runs");
+    assert!(
+        o.status.success(),
+        "{name} {args:?} failed:\n{}\n{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
+    String::from_utf8_lossy(&o.stdout).to_string()
+}
+
+/// Every file under `a` also under `b` with the same bytes (JSON: the same but for timings).
+fn assert_same_products(a: &Path, b: &Path) {
+    let (fa, fb) = (files(a), files(b));
+    assert_eq!(fa, fb, "{a:?} and {b:?} hold different files");
+    assert!(fa.iter().any(|f| f.ends_with("tile.bin")), "{fa:?}");
+    for f in &fa {
+        let (x, y) = (
+            std::fs::read(a.join(f)).unwrap(),
+            std::fs::read(b.join(f)).unwrap(),
+        );
+        if f.extension().is_some_and(|e| e == "json") {
+            let (jx, jy): (serde_json::Value, serde_json::Value) = (
+                serde_json::from_slice(&x).unwrap(),
+                serde_json::from_slice(&y).unwrap(),
+            );
+            assert_eq!(without_timings(jx), without_timings(jy), "{f:?} differs");
+        } else {
+            assert!(x == y, "{f:?} differs between {a:?} and {b:?}");
+        }
+    }
 }
 
 fn refs(v: &[String]) -> Vec<&str> {
@@ -122,27 +170,35 @@ fn blocks_in_separate_processes_mosaic_to_the_one_process_map() {
         assert!(t.contains(&format!("block {i}/4")), "{t}");
     }
     run(&refs(&args(&common(&split), &["--mosaic"])));
-    let (fa, fb) = (files(&blocked), files(&split));
-    assert_eq!(fa, fb, "the two runs wrote different files");
-    assert!(fa.iter().any(|f| f.ends_with("tile.bin")), "{fa:?}");
-    for f in &fa {
-        let (a, b) = (
-            std::fs::read(blocked.join(f)).unwrap(),
-            std::fs::read(split.join(f)).unwrap(),
-        );
-        if f.extension().is_some_and(|e| e == "json") {
-            let (ja, jb): (serde_json::Value, serde_json::Value) = (
-                serde_json::from_slice(&a).unwrap(),
-                serde_json::from_slice(&b).unwrap(),
-            );
-            assert_eq!(without_timings(ja), without_timings(jb), "{f:?} differs");
-        } else {
-            assert!(
-                a == b,
-                "{f:?} differs between the one-process and the split run"
-            );
-        }
-    }
+    assert_same_products(&blocked, &split);
+
+    // The job scripts: local worker processes, and Slurm's job array + mosaic job (a stand-in
+    // sbatch runs them here; no Slurm on this machine).
+    let flags = [
+        "--dem",
+        path(&dem),
+        "--block-cells",
+        "40",
+        "--block-overlap-cells",
+        "8",
+    ];
+    let local = dir.path().join("local");
+    let mut a = vec!["2", path(&local)];
+    a.extend(flags);
+    script("local-blocks.sh", &a, dir.path());
+    std::fs::remove_dir_all(local.join("logs")).unwrap();
+    assert_same_products(&blocked, &local);
+    let bin_dir = dir.path().join("bin");
+    common::install_fake_sbatch(&bin_dir);
+    let slurm = dir.path().join("slurm-out");
+    let mut a = vec![path(&slurm)];
+    a.extend(flags);
+    let text = script("slurm-insar-blocks.sh", &a, &bin_dir);
+    assert!(text.contains("4 tasks"), "{text}");
+    let job = std::fs::read_to_string(slurm.join("slurm/block.sbatch")).unwrap();
+    assert!(job.contains("#SBATCH --array=0-3"), "{job}");
+    std::fs::remove_dir_all(slurm.join("slurm")).unwrap();
+    assert_same_products(&blocked, &slurm);
 
     // Seams: no whole-cycle disagreement, the blend zones as good as the rest, the mosaic as
     // good as the map made in one piece.

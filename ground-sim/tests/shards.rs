@@ -4,6 +4,8 @@
 //! `sbatch` (no Slurm here); `merge` refuses gaps, duplicates and shards of another campaign;
 //! `--shard` refuses malformed text.
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
@@ -56,33 +58,11 @@ fn local_shards(n: usize, out: &Path, cmd: &str, args: &[&str]) {
     );
 }
 
-/// A stand-in for Slurm's `sbatch`: runs the job script at once (array tasks in turn, with
-/// `SLURM_ARRAY_TASK_ID` set) in its `--chdir`, and prints a job id as `--parsable` does. A
-/// failing task fails the submission, which is what `afterok` makes of the merge.
-const FAKE_SBATCH: &str = r#"#!/usr/bin/env bash
-set -euo pipefail
-script=""
-for a in "$@"; do
-    case $a in -*) ;; *) script=$a ;; esac
-done
-cd "$(sed -n 's/^#SBATCH --chdir=//p' "$script")"
-range=$(sed -n 's/^#SBATCH --array=//p' "$script")
-if [[ -n $range ]]; then
-    for ((i = ${range%-*}; i <= ${range#*-}; i++)); do
-        SLURM_ARRAY_TASK_ID=$i SLURM_CPUS_PER_TASK=1 bash "$script" >&2
-    done
-else
-    bash "$script" >&2
-fi
-echo "$RANDOM"
-"#;
-
-/// `tools/slurm-campaign.sh N OUT CMD ARGS...` with this build's binary and [`FAKE_SBATCH`].
+/// `tools/slurm-campaign.sh N OUT CMD ARGS...` with this build's binary and a stand-in
+/// `sbatch` (`common::FAKE_SBATCH`).
 fn slurm_campaign(n: usize, out: &Path, cmd: &str, args: &[&str], bin_dir: &Path) {
     std::fs::create_dir_all(bin_dir).unwrap();
-    let sbatch = bin_dir.join("sbatch");
-    std::fs::write(&sbatch, FAKE_SBATCH).unwrap();
-    std::fs::set_permissions(&sbatch, std::os::unix::fs::PermissionsExt::from_mode(0o755)).unwrap();
+    common::install_fake_sbatch(bin_dir);
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tools/slurm-campaign.sh");
     let path = format!("{}:{}", bin_dir.display(), std::env::var("PATH").unwrap());
     let o = Command::new("bash")

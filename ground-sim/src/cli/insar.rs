@@ -78,6 +78,10 @@ pub struct Args {
     /// products, without simulating anything.
     #[arg(long)]
     pub mosaic: bool,
+    /// Print how the map would be cut (`blocks N rows R cols C`; N = 1 when it fits one
+    /// piece) and stop: what a job-array script needs to know.
+    #[arg(long, conflicts_with_all = ["mosaic", "block"])]
+    pub plan_blocks: bool,
 }
 
 /// The radar configuration of an InSAR run: `RadarArgs` resolved as for `sar`, but only the
@@ -334,6 +338,23 @@ pub fn print_report(r: &InsarReport, out: &Path) {
 
 /// Run `ground-sim insar`.
 pub fn run(a: &Args) -> anyhow::Result<()> {
+    if a.plan_blocks {
+        let truth = read_geotiff(&a.dem).with_context(|| format!("reading {}", a.dem.display()))?;
+        match blocks::layout_for(&truth, a.pixel_m, a.block_cells, a.block_overlap_cells)? {
+            Some(l) => println!(
+                "blocks {} rows {} cols {} grid {}x{} block_cells {} overlap_cells {}",
+                l.count(),
+                l.rows,
+                l.cols,
+                l.grid_width,
+                l.grid_height,
+                l.block_cells,
+                l.overlap_cells
+            ),
+            None => println!("blocks 1 (one piece)"),
+        }
+        return Ok(());
+    }
     let r = match run_chain(a)? {
         Outcome::Map(r) => r,
         Outcome::Block(r) => {
