@@ -257,8 +257,12 @@ fn blocks_in_separate_processes_mosaic_to_the_one_process_map() {
         &["--mosaic", "--min-coherence", "0.4"],
     )));
     assert!(e.contains("other settings"), "{e}");
-    let e = refused(&refs(&args(&common(&split), &["--looks", "both"])));
-    assert!(e.contains("--looks both"), "{e}");
+    // Blocks made and joined in other processes belong to their look directions.
+    let e = refused(&refs(&args(
+        &common(&split),
+        &["--mosaic", "--looks", "both"],
+    )));
+    assert!(e.contains("other settings"), "{e}");
     let e = refused(&[
         "insar",
         "--dem",
@@ -270,4 +274,87 @@ fn blocks_in_separate_processes_mosaic_to_the_one_process_map() {
         "0/1",
     ]);
     assert!(e.contains("fits one block"), "{e}");
+}
+
+#[test]
+fn both_look_directions_in_blocks() {
+    let dir = tempfile::tempdir().unwrap();
+    let dem = dir.path().join("dem.tif");
+    run(&[
+        "terrain",
+        "--preset",
+        "shoemaker",
+        "--seed",
+        "2",
+        "--size-m",
+        "1600",
+        "--pixel-m",
+        "10",
+        "--out",
+        path(&dem),
+    ]);
+    let (blocked, split, one) = (
+        dir.path().join("blocked"),
+        dir.path().join("split"),
+        dir.path().join("one"),
+    );
+    let common = |out: &Path| -> Vec<String> {
+        [
+            "insar",
+            "--dem",
+            path(&dem),
+            "--out",
+            path(out),
+            "--no-progress",
+            "--looks",
+            "both",
+            "--block-cells",
+            "40",
+            "--block-overlap-cells",
+            "8",
+        ]
+        .iter()
+        .map(|s| s.to_string())
+        .collect()
+    };
+    run(&refs(&common(&blocked)));
+    for i in 0..4 {
+        let mut a = common(&split);
+        a.extend(["--block".to_string(), format!("{i}/4")]);
+        run(&refs(&a));
+    }
+    let mut a = common(&split);
+    a.push("--mosaic".into());
+    run(&refs(&a));
+    assert_same_products(&blocked, &split);
+    run(&[
+        "insar",
+        "--dem",
+        path(&dem),
+        "--out",
+        path(&one),
+        "--no-progress",
+        "--looks",
+        "both",
+        "--block-cells",
+        "0",
+    ]);
+    let read = |d: &Path| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(d.join("report.json")).unwrap()).unwrap()
+    };
+    let (b, o) = (read(&blocked), read(&one));
+    let f = |v: &serde_json::Value| v.as_f64().unwrap();
+    // Both passes fused in every block, as in one piece.
+    assert!(f(&b["looks"]["both_valid"]) > 0.8, "{}", b["looks"]);
+    assert!(
+        f(&b["valid_fraction"]) >= f(&o["valid_fraction"]) - 0.02,
+        "{b} vs {o}"
+    );
+    assert!(
+        f(&b["height_rmse_m"]) <= 1.3 * f(&o["height_rmse_m"]) + 0.2,
+        "{} vs {}",
+        b["height_rmse_m"],
+        o["height_rmse_m"]
+    );
+    assert_eq!(b["blocks"]["overlap_cycle_disagreements"], 0);
 }

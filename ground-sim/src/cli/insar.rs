@@ -127,10 +127,6 @@ pub fn run_chain(a: &Args) -> anyhow::Result<Outcome> {
     let layout = blocks::layout_for(&truth, cfg.pixel_m, a.block_cells, a.block_overlap_cells)?;
     if let Some(layout) = layout {
         anyhow::ensure!(
-            a.looks == LookDirections::One,
-            "--looks both is not made in blocks yet: give --block-cells 0 (one piece) for it"
-        );
-        anyhow::ensure!(
             a.slc_dir.is_none(),
             "--slc-dir holds one pass of the whole scene; a map in blocks simulates its blocks \
              itself (give --block-cells 0 to process those SLCs in one piece)"
@@ -143,6 +139,7 @@ pub fn run_chain(a: &Args) -> anyhow::Result<Outcome> {
             layout,
             out: &a.out,
             progress: !a.no_progress,
+            looks: a.looks,
         };
         return run_blocks(a, &job, ctx);
     }

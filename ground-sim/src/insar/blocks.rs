@@ -27,8 +27,8 @@ use super::accuracy::window_truth;
 use super::geocode::{OutputGrid, label};
 use super::geometry::PairGeometry;
 use super::pipeline::{
-    CoregReport, InsarConfig, InsarProduct, MaskFractions, RadarLayers, TruthOnGrid, UnwrapReport,
-    process_pair,
+    CoregReport, InsarConfig, InsarProduct, LookDirections, LookFusion, MaskFractions, RadarLayers,
+    TruthOnGrid, UnwrapReport, fuse_looks, mirrored_dem, process_pair,
 };
 use super::products::SarSummary;
 use crate::dem::{Dem, SampleKind, read_geotiff, write_geotiff};
@@ -257,6 +257,8 @@ pub struct BlockRecord {
     pub filled_nodata: usize,
     /// InSAR processing time, s.
     pub insar_s: f64,
+    /// With both look directions: how the block's two passes were fused.
+    pub look_fusion: Option<LookFusion>,
 }
 
 /// Settings of a blocked run, shared by every block.
@@ -276,6 +278,8 @@ pub struct BlockJob<'a> {
     pub out: &'a Path,
     /// Show the SAR progress bars.
     pub progress: bool,
+    /// One pass (east-looking) or both (each block also seen looking west, then fused).
+    pub looks: LookDirections,
 }
 
 /// The layout of `truth` mapped at `cfg.pixel_m`, or `None` when the map fits one block.
@@ -322,6 +326,7 @@ pub fn digest(job: &BlockJob<'_>) -> anyhow::Result<String> {
     d.update(job.pol.tag().as_bytes());
     d.update(serde_json::to_string(job.cfg)?.as_bytes());
     d.update(serde_json::to_string(&job.layout)?.as_bytes());
+    d.update(job.looks.name().as_bytes());
     Ok(format!("{:016x}", d.finalize()))
 }
 
@@ -330,21 +335,33 @@ pub fn block_dir(out: &Path, index: usize) -> PathBuf {
     out.join(BLOCKS_DIR).join(format!("block-{index:03}"))
 }
 
-/// Simulate and process block `index` of `job`; write its rasters and `block.json` into
-/// [`block_dir`]. Returns the record.
-pub fn run_block(job: &BlockJob<'_>, index: usize) -> anyhow::Result<BlockRecord> {
-    let spec = job.layout.block(index)?;
-    let k = cells_per_pixel(job.truth, job.cfg.pixel_m)?;
-    let p = job.truth.pixel_m()?;
+/// One look's pass over a block: the product on the block's grid and the SAR figures.
+struct BlockPass {
+    product: InsarProduct,
+    window_side_m: f64,
+    timings: Timings,
+    facets: [usize; 3],
+    filled: usize,
+}
+
+/// Simulate and process the input-pixel rectangle `(r0, c0, w, h)` of `scene` (the whole scene,
+/// or its mirror for the west-looking pass) as one block seen from the scene's track.
+fn run_pass(
+    job: &BlockJob<'_>,
+    scene: &Dem,
+    rect: [usize; 4],
+    noise_seed: u64,
+    what: &str,
+) -> anyhow::Result<BlockPass> {
+    let [r0, c0, w, h] = rect;
+    let p = scene.pixel_m()?;
     // The whole scene in the radar's frame, nodata filled once for all blocks alike.
-    let (whole, filled) = SarDem::from_dem(job.truth)?;
+    let (whole, filled) = SarDem::from_dem(scene)?;
     let centre = [
         0.5 * (whole.height - 1) as f64 * p,
         0.5 * (whole.width - 1) as f64 * p,
         whole.mean_height_m(),
     ];
-    let e = spec.extent;
-    let (r0, c0, w, h) = (e.row0 * k, e.col0 * k, e.width() * k, e.height() * k);
     let mut heights = Vec::with_capacity(w * h);
     for r in r0..r0 + h {
         heights.extend_from_slice(&whole.heights_m[r * whole.width + c0..r * whole.width + c0 + w]);
@@ -359,7 +376,7 @@ pub fn run_block(job: &BlockJob<'_>, index: usize) -> anyhow::Result<BlockRecord
         MeshOffset {
             row: r0 * s,
             col: c0 * s,
-            cells_wide: (job.truth.width() - 1) * s,
+            cells_wide: (scene.width() - 1) * s,
         }
     });
     let opts = SimOptions {
@@ -367,29 +384,82 @@ pub fn run_block(job: &BlockJob<'_>, index: usize) -> anyhow::Result<BlockRecord
         scene: Some(SceneFrame {
             centre_m: centre,
             mesh_offset,
-            noise_seed: splitmix64(job.sar.seed ^ splitmix64(index as u64 + 1)),
+            noise_seed,
         }),
         ..SimOptions::default()
     };
-    let pair = simulate_with(&sdem, job.sar, &opts)
-        .with_context(|| format!("simulating block {index}"))?;
+    let pair =
+        simulate_with(&sdem, job.sar, &opts).with_context(|| format!("simulating {what}"))?;
     drop(sdem);
     let slc = |a: Antenna| {
         pair.slc(a, job.pol)
             .ok_or_else(|| anyhow::anyhow!("no {a:?} {} SLC", job.pol.tag()))
     };
-    let sub_truth = job.truth.crop_px(c0, r0, w, h)?;
+    let sub_truth = scene.crop_px(c0, r0, w, h)?;
     let truth_grid = crate::reference::reference_dem(&sub_truth, job.cfg.pixel_m)?;
     let mut grid = OutputGrid::aligned(&sub_truth, &truth_grid)?;
     grid.x0_m += origin[0];
     grid.y0_m += origin[1];
     let product = process_pair(slc(Antenna::A1)?, slc(Antenna::A2)?, &grid, job.cfg)
-        .with_context(|| format!("processing block {index}"))?;
+        .with_context(|| format!("processing {what}"))?;
     let (a1, g) = (slc(Antenna::A1)?, &product.geometry);
     let n = job.cfg.window.size as f64;
     let centre_r = g.range_m(0.5 * (a1.gates as f64 - 1.0));
     let window_side_m = 0.5
         * (n * g.azimuth_spacing_m + n * g.range_spacing_m / g.flat_look_angle_rad(centre_r).sin());
+    Ok(BlockPass {
+        product,
+        window_side_m,
+        timings: pair.timings.clone(),
+        facets: [pair.stats.facets, pair.stats.shadowed, pair.stats.layover],
+        filled,
+    })
+}
+
+/// Simulate and process block `index` of `job` (with [`LookDirections::Both`], also the
+/// west-looking pass over the mirrored scene, fused cell by cell as in one piece); write its
+/// rasters and `block.json` into [`block_dir`]. Returns the record.
+pub fn run_block(job: &BlockJob<'_>, index: usize) -> anyhow::Result<BlockRecord> {
+    let spec = job.layout.block(index)?;
+    let k = cells_per_pixel(job.truth, job.cfg.pixel_m)?;
+    let e = spec.extent;
+    let (r0, c0, w, h) = (e.row0 * k, e.col0 * k, e.width() * k, e.height() * k);
+    let seed = |look: u64| splitmix64(job.sar.seed ^ splitmix64(index as u64 + 1 + (look << 32)));
+    let mut east = run_pass(
+        job,
+        job.truth,
+        [r0, c0, w, h],
+        seed(0),
+        &format!("block {index}"),
+    )?;
+    let mut look_fusion = None;
+    if job.looks == LookDirections::Both {
+        // The same block of the mirrored scene: its columns reversed are this block's.
+        let mirrored = mirrored_dem(job.truth)?;
+        let mc0 = job.truth.width() - (c0 + w);
+        let west = run_pass(
+            job,
+            &mirrored,
+            [r0, mc0, w, h],
+            seed(1),
+            &format!("block {index}, west-looking pass"),
+        )?;
+        look_fusion = Some(fuse_looks(&mut east.product, &west.product)?);
+        east.timings.scene_s += west.timings.scene_s;
+        east.timings.echoes_s += west.timings.echoes_s;
+        east.timings.focusing_s += west.timings.focusing_s;
+        east.timings.total_s += west.timings.total_s;
+        for (a, b) in east.facets.iter_mut().zip(west.facets) {
+            *a += b;
+        }
+    }
+    let BlockPass {
+        product,
+        window_side_m,
+        timings,
+        facets,
+        filled,
+    } = east;
     let record = BlockRecord {
         version: BLOCK_FORMAT_VERSION,
         digest: digest(job)?,
@@ -404,10 +474,11 @@ pub fn run_block(job: &BlockJob<'_>, index: usize) -> anyhow::Result<BlockRecord
         eq20_removed: product.eq20_removed,
         geometry_removed: product.geometry_removed,
         coherence_mean_radar: product.coherence_mean_radar,
-        sar_timings: pair.timings.clone(),
-        facets: [pair.stats.facets, pair.stats.shadowed, pair.stats.layover],
+        sar_timings: timings,
+        facets,
         filled_nodata: filled,
         insar_s: product.seconds,
+        look_fusion,
     };
     let dir = block_dir(job.out, index);
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
@@ -567,6 +638,38 @@ pub struct Mosaic {
     pub sar: SarSummary,
     /// Nodata heights filled in the input.
     pub filled_nodata: usize,
+}
+
+/// The blocks' look fusions as one, each block weighted by its cells (margins included).
+fn fused_looks(blocks: &[BlockProduct]) -> Option<LookFusion> {
+    let parts: Vec<(f64, LookFusion)> = blocks
+        .iter()
+        .map(|b| {
+            let e = b.record.block.extent;
+            b.record
+                .look_fusion
+                .map(|f| ((e.width() * e.height()) as f64, f))
+        })
+        .collect::<Option<_>>()?;
+    let total: f64 = parts.iter().map(|(n, _)| n).sum();
+    let mean = |f: &dyn Fn(&LookFusion) -> f64| {
+        parts.iter().map(|(n, l)| n * f(l)).sum::<f64>() / total.max(1.0)
+    };
+    let mask = |f: &dyn Fn(&LookFusion) -> MaskFractions| MaskFractions {
+        valid: mean(&|l| f(l).valid),
+        layover: mean(&|l| f(l).layover),
+        shadow: mean(&|l| f(l).shadow),
+        low_coherence: mean(&|l| f(l).low_coherence),
+        outside: mean(&|l| f(l).outside),
+    };
+    Some(LookFusion {
+        east_mask: mask(&|l| l.east_mask),
+        west_mask: mask(&|l| l.west_mask),
+        both_valid: mean(&|l| l.both_valid),
+        east_only: mean(&|l| l.east_only),
+        west_only: mean(&|l| l.west_only),
+        inconsistent: mean(&|l| l.inconsistent),
+    })
 }
 
 /// Join the blocks of `job` found in `OUT/blocks/` (all of them must be there, made from the
@@ -760,7 +863,7 @@ pub fn mosaic(job: &BlockJob<'_>) -> anyhow::Result<Mosaic> {
             .sum::<f64>()
             / blocks.len() as f64,
         seconds: blocks.iter().map(|b| b.record.insar_s).sum(),
-        look_fusion: None,
+        look_fusion: fused_looks(&blocks),
     };
     Ok(Mosaic {
         truth: TruthOnGrid {

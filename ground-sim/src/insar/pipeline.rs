@@ -268,7 +268,7 @@ impl LookDirections {
 }
 
 /// How two look directions were fused on the output grid.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct LookFusion {
     /// Mask fractions of the east-looking pass alone.
     pub east_mask: MaskFractions,
