@@ -301,7 +301,7 @@ pub fn print_report(r: &InsarReport, out: &Path) {
         let l = &b.layout;
         println!(
             "blocks     {}x{} blocks of <= {} cells (+{} each side); seams: {} cells compared, \
-             difference RMS {:.2} m, max {:.2} m, {} whole-cycle",
+             difference RMS {:.2} m, max {:.2} m, {} whole-cycle ({} map cells dropped)",
             l.rows,
             l.cols,
             l.block_cells,
@@ -309,7 +309,8 @@ pub fn print_report(r: &InsarReport, out: &Path) {
             b.overlap_cells_compared,
             b.overlap_height_diff_rms_m,
             b.overlap_height_diff_max_m,
-            b.overlap_cycle_disagreements
+            b.overlap_cycle_disagreements,
+            b.cells_dropped_for_cycles
         );
         println!(
             "           height RMSE in the blend zones {:.2} m ({} cells), elsewhere {:.2} m ({} cells); peak RSS {}",

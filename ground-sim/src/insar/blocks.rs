@@ -15,8 +15,10 @@
 //! multilook windows, ground beyond the block that would shadow or fold onto it), and the
 //! middle `overlap_cells` ramp linearly from one block to the other (weights sum to 1). A cell's
 //! mask code is the code of its heaviest block; a valid cell's height, coherence and height
-//! bound are the weighted mean over the blocks valid there. Seams are checked: the height
-//! difference of overlapping blocks where both are valid, and whole-cycle disagreements.
+//! bound are the weighted mean over the blocks valid there, unless those blocks disagree by
+//! whole cycles (their unwrappings took different 2π multiples), when the cell is dropped.
+//! Seams are checked: the height difference of overlapping blocks where both are valid, and
+//! whole-cycle disagreements.
 
 use std::path::{Path, PathBuf};
 
@@ -589,6 +591,9 @@ pub struct MosaicReport {
     /// Cells where overlapping blocks differ by more than half a height of ambiguity (a
     /// whole-cycle disagreement between their unwrappings).
     pub overlap_cycle_disagreements: usize,
+    /// Map cells dropped (masked as low coherence) because the blocks that weigh there
+    /// disagree by whole cycles.
+    pub cells_dropped_for_cycles: usize,
     /// Mosaic height RMSE against the truth in the blend zones (cells more than one block
     /// weighs), m.
     pub height_rmse_blend_zone_m: f64,
@@ -697,6 +702,7 @@ pub fn mosaic(job: &BlockJob<'_>) -> anyhow::Result<Mosaic> {
     let mut labels = vec![label::OUTSIDE; n];
     let mut blend_zone = vec![false; n];
     let (mut diff_ss, mut diff_max, mut compared, mut cycles) = (0.0f64, 0.0f64, 0usize, 0usize);
+    let mut dropped = 0usize;
     for row in 0..gh {
         for col in 0..gw {
             let i = row * gw + col;
@@ -741,8 +747,22 @@ pub fn mosaic(job: &BlockJob<'_>) -> anyhow::Result<Mosaic> {
             if labels[i] != label::VALID {
                 continue;
             }
+            // Blocks that weigh here and disagree by whole cycles: a mean would be wrong by a
+            // fraction of a cycle that no mask shows, and which one is right is not known here,
+            // so neither is kept (as two looks that disagree, `fuse_looks`).
+            let weighing: Vec<_> = valid.iter().filter(|v| v.0 > 0.0).collect();
+            let split = weighing.iter().enumerate().any(|(m, a)| {
+                weighing[m + 1..]
+                    .iter()
+                    .any(|b| (f64::from(a.1) - f64::from(b.1)).abs() > 0.25 * (a.4 + b.4))
+            });
+            if split {
+                labels[i] = label::LOW_COHERENCE;
+                dropped += 1;
+                continue;
+            }
             let (mut sw, mut sh, mut sc, mut ss) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
-            for &(wgt, h, c, s, _) in valid.iter().filter(|v| v.0 > 0.0) {
+            for &&(wgt, h, c, s, _) in &weighing {
                 sw += wgt;
                 sh += wgt * f64::from(h);
                 sc += wgt * f64::from(c);
@@ -816,6 +836,7 @@ pub fn mosaic(job: &BlockJob<'_>) -> anyhow::Result<Mosaic> {
         overlap_height_diff_rms_m: rms(diff_ss, compared),
         overlap_height_diff_max_m: diff_max,
         overlap_cycle_disagreements: cycles,
+        cells_dropped_for_cycles: dropped,
         height_rmse_blend_zone_m: rms(ss_in, n_in),
         height_rmse_elsewhere_m: rms(ss_out, n_out),
         valid_cells: [n_in, n_out],
