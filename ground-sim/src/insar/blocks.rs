@@ -674,6 +674,11 @@ fn fused_looks(blocks: &[BlockProduct]) -> Option<LookFusion> {
         east_only: mean(&|l| l.east_only),
         west_only: mean(&|l| l.west_only),
         inconsistent: mean(&|l| l.inconsistent),
+        // Blocks align their looks on their own; the map reports how many blocks needed it.
+        west_cycles_shifted: parts
+            .iter()
+            .filter(|(_, l)| l.west_cycles_shifted != 0)
+            .count() as i64,
     })
 }
 

@@ -283,6 +283,21 @@ pub struct LookFusion {
     /// Fraction valid in both passes whose heights disagree by more than
     /// [`FUSE_CONSISTENCY_SIGMAS`] combined CRLBs; dropped (labelled low coherence).
     pub inconsistent: f64,
+    /// Whole cycles removed from the west pass to align its unwrapping on the east pass's
+    /// ([`fuse_looks`]); 0 when they agreed.
+    #[serde(default)]
+    pub west_cycles_shifted: i64,
+}
+
+/// Least cells valid in both looks for [`fuse_looks`] to align the two unwrappings' cycles.
+pub const CYCLE_ALIGN_MIN_CELLS: usize = 100;
+
+/// Height, m, that one whole cycle of `p`'s unwrapped phase makes in grid column `col` (its
+/// height of ambiguity at that column's slant range on the datum).
+pub fn cycle_height_m(p: &InsarProduct, col: usize) -> f64 {
+    let g = &p.geometry;
+    let r1 = (p.grid.y_m(col) - g.a1_yz_m[0]).hypot(g.a1_yz_m[1] - g.datum_m);
+    g.ambiguity_height_m(r1)
 }
 
 /// Two looks' heights of one cell that differ by more than this many combined per-cell CRLBs
@@ -878,10 +893,36 @@ pub fn fuse_looks(east: &mut InsarProduct, west: &InsarProduct) -> anyhow::Resul
         west.labels.len() == n && west.grid.width == w && west.grid.height == east.grid.height,
         "the two looks' grids differ"
     );
-    let wd = mirror_columns(west.dem.heights_m(), w);
+    let mut wd = mirror_columns(west.dem.heights_m(), w);
     let wc = mirror_columns(west.coherence.heights_m(), w);
     let ws = mirror_columns(west.crlb_m.heights_m(), w);
     let wl = mirror_columns(&west.labels, w);
+    // Each pass's unwrapping picks the cycle that puts its own valid mean nearest the datum;
+    // where the relief spans a cycle and the two passes see different ground (layover), they
+    // can sit whole cycles apart. Align the west pass on the east by the median whole-cycle
+    // difference of the cells both see (each cell's cycle at the west pass's own range).
+    let cycle: Vec<f64> = (0..n)
+        .map(|i| cycle_height_m(west, w - 1 - i % w.max(1)))
+        .collect();
+    let mut apart: Vec<f64> = (0..n)
+        .filter(|&i| {
+            east.labels[i] == label::VALID
+                && wl[i] == label::VALID
+                && east.dem.heights_m()[i].is_finite()
+                && wd[i].is_finite()
+        })
+        .map(|i| (f64::from(wd[i]) - f64::from(east.dem.heights_m()[i])) / cycle[i])
+        .collect();
+    let mut west_cycles_shifted = 0i64;
+    if apart.len() >= CYCLE_ALIGN_MIN_CELLS {
+        apart.sort_by(f64::total_cmp);
+        west_cycles_shifted = apart[apart.len() / 2].round() as i64;
+        if west_cycles_shifted != 0 {
+            for (v, c) in wd.iter_mut().zip(&cycle) {
+                *v = (f64::from(*v) - west_cycles_shifted as f64 * c) as f32;
+            }
+        }
+    }
     let east_mask = east.mask;
     let (mut both, mut e_only, mut w_only, mut inconsistent) = (0usize, 0usize, 0usize, 0usize);
     let mut dem = east.dem.heights_m().to_vec();
@@ -946,6 +987,7 @@ pub fn fuse_looks(east: &mut InsarProduct, west: &InsarProduct) -> anyhow::Resul
         east_only: frac(e_only),
         west_only: frac(w_only),
         inconsistent: frac(inconsistent),
+        west_cycles_shifted,
     };
     east.look_fusion = Some(fusion);
     east.seconds += west.seconds;

@@ -635,6 +635,54 @@ fn recentring_moves_plane_heights_back_to_the_window_centres() {
 }
 
 #[test]
+fn a_second_look_a_whole_cycle_off_is_aligned_before_fusing() {
+    use super::pipeline::{cycle_height_m, fuse_looks, mirrored_dem, run_from_dem};
+    let t = 35f64.to_radians().tan();
+    let dem = scene(200, 5.0, |x, _| -2000.0 + t * (x - 400.0).clamp(0.0, 200.0));
+    let cfg = InsarConfig {
+        shadow_below_median_db: f64::INFINITY,
+        ..InsarConfig::default()
+    };
+    let east = run_from_dem(&dem, &quiet(), Polarisation::HH, &cfg, false).unwrap();
+    let west = run_from_dem(
+        &mirrored_dem(&dem).unwrap(),
+        &quiet(),
+        Polarisation::HH,
+        &cfg,
+        false,
+    )
+    .unwrap();
+    let mut fused = east.product.clone();
+    let f0 = fuse_looks(&mut fused, &west.product).unwrap();
+    assert_eq!(f0.west_cycles_shifted, 0, "{f0:?}");
+    // The west pass's unwrapping one cycle up (as when its valid mean sits a cycle away).
+    let mut slipped = west.product.clone();
+    let w = slipped.grid.width;
+    let up: Vec<f32> = slipped
+        .dem
+        .heights_m()
+        .iter()
+        .enumerate()
+        .map(|(i, &h)| (f64::from(h) + cycle_height_m(&west.product, i % w)) as f32)
+        .collect();
+    slipped.dem = slipped.grid.raster(up).unwrap();
+    let mut fused2 = east.product.clone();
+    let f1 = fuse_looks(&mut fused2, &slipped).unwrap();
+    assert_eq!(f1.west_cycles_shifted, 1, "{f1:?}");
+    assert_eq!(fused2.labels, fused.labels);
+    assert!(
+        (f1.inconsistent - f0.inconsistent).abs() < 1e-12,
+        "{f0:?} {f1:?}"
+    );
+    for (a, b) in fused.dem.heights_m().iter().zip(fused2.dem.heights_m()) {
+        assert!(
+            a.is_nan() == b.is_nan() && (a.is_nan() || (a - b).abs() < 1e-3),
+            "{a} {b}"
+        );
+    }
+}
+
+#[test]
 fn looks_that_differ_by_a_cycle_are_not_fused() {
     use super::pipeline::looks_disagree;
     // The 32 m boom's 183 m cycle between two 2 m-bound heights: one look slipped.
