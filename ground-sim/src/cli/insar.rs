@@ -219,9 +219,7 @@ fn run_blocks(
     let m = blocks::mosaic(job)?;
     ctx.sar = Some(m.sar.clone());
     ctx.filled_nodata = m.filled_nodata;
-    let mut report = m.report;
-    report.peak_rss_mib = blocks::peak_rss_mib();
-    ctx.blocks = Some(report);
+    ctx.blocks = Some(m.report);
     write_outputs(&a.out, &m.product, &m.truth, &ctx).map(|r| Outcome::Map(Box::new(r)))
 }
 

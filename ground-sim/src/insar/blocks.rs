@@ -210,15 +210,6 @@ impl BlockLayout {
         axis(row, spec.core.row0, spec.core.row1, self.grid_height)
             * axis(col, spec.core.col0, spec.core.col1, self.grid_width)
     }
-
-    /// Whether more than one block has weight at `(row, col)`: the blend zone.
-    pub fn in_blend_zone(&self, row: usize, col: usize) -> bool {
-        self.blocks()
-            .iter()
-            .filter(|b| self.weight(b, row, col) > 0.0)
-            .count()
-            > 1
-    }
 }
 
 /// What one block run records beside its rasters (`block.json`).
@@ -620,6 +611,8 @@ pub struct BlockLine {
     pub datum_m: f64,
     /// SAR simulation time, s.
     pub sar_s: f64,
+    /// With both looks: whole cycles its west pass was shifted by to align on the east pass.
+    pub west_cycles_shifted: Option<i64>,
 }
 
 /// Peak resident set of this process, MiB (Linux only).
@@ -674,7 +667,8 @@ fn fused_looks(blocks: &[BlockProduct]) -> Option<LookFusion> {
         east_only: mean(&|l| l.east_only),
         west_only: mean(&|l| l.west_only),
         inconsistent: mean(&|l| l.inconsistent),
-        // Blocks align their looks on their own; the map reports how many blocks needed it.
+        // Each block aligns its own looks (its shift is in `blocks.per_block`); the map's
+        // figure is how many blocks needed it (documented on the field).
         west_cycles_shifted: parts
             .iter()
             .filter(|(_, l)| l.west_cycles_shifted != 0)
@@ -853,6 +847,7 @@ pub fn mosaic(job: &BlockJob<'_>) -> anyhow::Result<Mosaic> {
                 unwrap_pixels_changed: b.record.unwrap.pixels_changed,
                 datum_m: b.record.geometry.datum_m,
                 sar_s: b.record.sar_timings.total_s,
+                west_cycles_shifted: b.record.look_fusion.map(|f| f.west_cycles_shifted),
             })
             .collect(),
         peak_rss_mib: peak_rss_mib(),

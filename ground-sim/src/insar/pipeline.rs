@@ -284,7 +284,8 @@ pub struct LookFusion {
     /// [`FUSE_CONSISTENCY_SIGMAS`] combined CRLBs; dropped (labelled low coherence).
     pub inconsistent: f64,
     /// Whole cycles removed from the west pass to align its unwrapping on the east pass's
-    /// ([`fuse_looks`]); 0 when they agreed.
+    /// ([`fuse_looks`]); 0 when they agreed. For a map made in blocks: how many blocks were
+    /// shifted (each block's own shift is in the report's `blocks.per_block`).
     #[serde(default)]
     pub west_cycles_shifted: i64,
 }
