@@ -42,6 +42,9 @@ enum Commands {
     Eval(cli::eval::Args),
     /// Campaign of closed-loop hops: dynamics, IMU, TRN fixes, nav filter, guidance.
     Descent(cli::descent::Args),
+    /// Cut a reference tile's map into a flight atlas: overlapping tiles of bounded size plus
+    /// an index, as the flyer reads it.
+    Atlas(cli::atlas::Args),
     /// Join the shard files of one `eval` or `descent` campaign (`--shard I/N`) into the summary,
     /// CSV and pictures the unsharded command writes.
     Merge(cli::merge::Args),
@@ -92,6 +95,7 @@ fn dispatch(cli: Cli) -> anyhow::Result<()> {
         Commands::Trn(a) => cli::trn::run(a),
         Commands::Eval(a) => cli::eval::run(a),
         Commands::Descent(a) => cli::descent::run(a),
+        Commands::Atlas(a) => cli::atlas::run(a),
         Commands::Merge(a) => cli::merge::run(a),
         Commands::Suite(a) => cli::suite::run(a),
         Commands::Navmap(a) => cli::navmap::run(a),

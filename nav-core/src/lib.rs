@@ -27,7 +27,9 @@
 //! 12. [`odometry`]: below the tile's reach, frames located on a keyframe (an earlier frame of
 //!     the flyer's own, turned into a tile in RAM) with the same navigator; the displacement
 //!     goes to the filter as a relative measurement against its cloned keyframe position.
-//! 13. [`hazard`]: near the ground, a hazard map of a frame (plane tilt and relief over the
+//! 13. [`atlas`]: the reference of a whole corridor as bounded tiles plus an index; the tile
+//!     under the prior is selected (neighbours tried when a frame straddles a tile edge).
+//! 14. [`hazard`]: near the ground, a hazard map of a frame (plane tilt and relief over the
 //!     lander's footprint, clearance to the nearest hazard) and the safe site nearest the target.
 //!
 //! ## Rules this crate keeps
@@ -62,6 +64,7 @@
 #[cfg(test)]
 extern crate std;
 
+pub mod atlas;
 pub mod describe;
 pub mod detector;
 pub mod filter;

@@ -321,11 +321,34 @@ impl<'t> Navigator<'t> {
         let cfg = self.frame_surf_config(img.pixel_m());
         extract(&img, &cfg, surf.scratch(), features)?;
         features.unbin(k);
-        let mut report = self.locate_features(ws, dem.width(), dem.height(), prior);
+        self.locate_extracted_dem(ws, dem.width(), dem.height(), k, prior, true)
+    }
+
+    /// The part of [`Self::locate_dem`] after the frame's slope and features are in `ws`:
+    /// matching, consensus, refinement, prior gate and (with `area_search`) the area search.
+    /// The atlas ([`crate::atlas`]) calls it again on a neighbour tile whose extraction
+    /// settings equal the first tile's, so the frame is not extracted twice.
+    pub(crate) fn locate_extracted_dem<
+        const P: usize,
+        const W: usize,
+        const K: usize,
+        const M: usize,
+    >(
+        &self,
+        ws: &mut NavWorkspace<P, W, K, M>,
+        width: usize,
+        height: usize,
+        k: usize,
+        prior: Option<&Prior>,
+        area_search: bool,
+    ) -> Result<FrameReport, NavError> {
+        let mut report = self.locate_features(ws, width, height, prior);
         let img = ws.slope.image()?;
-        self.refine_fix(&mut report, &img, k, dem.width(), dem.height());
+        self.refine_fix(&mut report, &img, k, width, height);
         self.prior_gate(&mut report, prior);
-        self.area_search(&mut report, &img, k, dem.width(), dem.height(), prior);
+        if area_search {
+            self.area_search(&mut report, &img, k, width, height, prior);
+        }
         Ok(report)
     }
 

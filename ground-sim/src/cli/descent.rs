@@ -15,10 +15,13 @@ use ground_sim::evaluation::shard::{
     CampaignInputs, SHARD_FORMAT, SHARD_VERSION, Shard, ShardFile,
 };
 use ground_sim::flyer::frames::{Terrain, centre_extent, frame_reach_m};
-use ground_sim::flyer::onboard::{Budget, WORKSPACE_STACK, new_workspace};
+use ground_sim::flyer::onboard::{
+    Budget, GROUND_ATLAS_TILES, MapNav, WORKSPACE_STACK, new_workspace,
+};
 use ground_sim::pictures::plot::{Plot, Series, Style};
 use ground_sim::reference::load;
 use ground_sim::terrain::landing::{LandingZoneConfig, landing_zone};
+use nav_core::atlas::{AtlasConfig, AtlasNavigator, MappedAtlas};
 use nav_core::{NavConfig, Navigator, Tile};
 use rand::{RngExt, SeedableRng};
 use rayon::prelude::*;
@@ -28,8 +31,13 @@ use serde::{Deserialize, Serialize};
 #[derive(Debug, clap::Args)]
 pub struct Args {
     /// Reference folder (tile.bin).
+    #[arg(long, required_unless_present = "atlas", conflicts_with = "atlas")]
+    pub tile: Option<PathBuf>,
+    /// Fly over a flight atlas instead of one tile (`atlas.bin` from `ground-sim atlas`): each
+    /// TRN frame is located on the tile under the filter's prior, and on a neighbour when it
+    /// straddles a tile edge (`nav_core::atlas`).
     #[arg(long)]
-    pub tile: PathBuf,
+    pub atlas: Option<PathBuf>,
     /// Truth DEM (GeoTIFF); it must be large enough for the hops.
     #[arg(long)]
     pub dem: PathBuf,
@@ -102,6 +110,13 @@ pub struct DescentSpec {
     /// The landing zones laid around each target (`None`: the coarse map alone).
     #[serde(default)]
     pub landing_zone: Option<LandingZoneConfig>,
+    /// What the frames were located on: `tile`, or `atlas of N tiles`.
+    #[serde(default = "default_reference")]
+    pub reference: String,
+}
+
+fn default_reference() -> String {
+    "tile".into()
 }
 
 /// A shard file of `descent`: the campaign spec and one record per hop.
@@ -119,6 +134,12 @@ pub struct DescentSummary {
     pub seed: u64,
     /// The navigator budget the frames were flown with (`flight` is what flies).
     pub budget: String,
+    /// What the frames were located on: `tile`, or `atlas of N tiles`.
+    pub reference: String,
+    /// Over an atlas: TRN frames located on more than one tile, all runs.
+    pub atlas_retries: usize,
+    /// Over an atlas: changes of the tile a frame's report came from, all runs.
+    pub atlas_tile_switches: usize,
     /// Median landing error, m: distance from the touchdown to the spot aimed at (the target, or
     /// the safe site chosen near it), truth.
     pub landing_err_p50_m: f64,
@@ -203,8 +224,17 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
     if a.runs == 0 {
         bail!("--runs must be ≥ 1");
     }
-    let reference = load(&a.tile)?;
-    let tile = Tile::parse(&reference.tile_bytes).map_err(|e| anyhow!("{e}"))?;
+    let (map_bytes, map_label) = match (&a.tile, &a.atlas) {
+        (Some(dir), None) => (load(dir)?.tile_bytes, "tile".to_string()),
+        (None, Some(file)) => {
+            let b = std::fs::read(file).with_context(|| format!("reading {}", file.display()))?;
+            let n = nav_core::atlas::Atlas::parse(&b)
+                .map_err(|e| anyhow!("{}: {e}", file.display()))?
+                .len();
+            (b, format!("atlas of {n} tiles"))
+        }
+        _ => bail!("give one of --tile and --atlas"),
+    };
     let dem = read_geotiff(&a.dem).with_context(|| format!("reading {}", a.dem.display()))?;
     let d = DescentConfig::default();
     let cfg = DescentConfig {
@@ -243,7 +273,20 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         rock_k: a.rock_k,
         ..LandingZoneConfig::default()
     });
-    let nav = Navigator::new(tile, NavConfig::default());
+    let single;
+    let mapped;
+    let atlas_nav = AtlasNavigator::new(AtlasConfig::default());
+    let nav = if a.atlas.is_some() {
+        mapped = Box::new(
+            MappedAtlas::<GROUND_ATLAS_TILES>::new(&map_bytes)
+                .map_err(|e| anyhow!("atlas: {e}"))?,
+        );
+        MapNav::Atlas(&mapped, &atlas_nav)
+    } else {
+        let tile = Tile::parse(&map_bytes).map_err(|e| anyhow!("{e}"))?;
+        single = Navigator::new(tile, NavConfig::default());
+        MapNav::Tile(&single)
+    };
     let pool = rayon::ThreadPoolBuilder::new()
         .stack_size(WORKSPACE_STACK)
         .build()?;
@@ -306,6 +349,7 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         budget: a.budget.budget,
         config: cfg,
         landing_zone: zone_cfg,
+        reference: map_label,
     };
     if a.shard.shard.is_none() {
         let dir = a
@@ -322,7 +366,7 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         trials: a.runs,
         seed: a.seed,
         budget: a.budget.budget.label(),
-        inputs: CampaignInputs::new(&reference.tile_bytes, &a.dem)?,
+        inputs: CampaignInputs::new(&map_bytes, &a.dem)?,
         spec,
         trial_indices: runs,
         records,
@@ -384,6 +428,9 @@ pub fn report(
         runs: per_run.len(),
         seed: spec.seed,
         budget: spec.budget.label(),
+        reference: spec.reference.clone(),
+        atlas_retries: per_run.iter().map(|r| r.atlas_retries).sum(),
+        atlas_tile_switches: per_run.iter().map(|r| r.atlas_tile_switches).sum(),
         landing_err_p50_m: percentile(&mut land.clone(), 0.5),
         landing_err_p95_m: percentile(&mut land.clone(), 0.95),
         landing_err_max_m: land.iter().copied().fold(0.0, f64::max),
@@ -485,6 +532,12 @@ pub fn report(
         "navigation   RMS {:.2} m; fixes {} accepted, {} rejected by the gate, {} frames without a fix",
         summary.nav_err_rms_m, summary.fixes, summary.rejected_fixes, summary.no_fixes
     );
+    if summary.reference != "tile" {
+        println!(
+            "reference    {}: {} tile changes, {} frames tried on a second tile",
+            summary.reference, summary.atlas_tile_switches, summary.atlas_retries
+        );
+    }
     if summary.config.odometry {
         println!(
             "odometry     {} offsets accepted, {} rejected by the gate, {} frames without one; {} keyframes\n             offsets vs truth: mean NEES {:.2} (2 if their σ is right), {:.1} % in the 95 % band",

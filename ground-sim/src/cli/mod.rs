@@ -2,6 +2,7 @@
 //! an `Args` struct (clap `Args`) and a `run(&Args) -> anyhow::Result<()>`, then add a variant to
 //! `Commands` in `main.rs`.
 
+pub mod atlas;
 pub mod demo;
 pub mod descent;
 pub mod eval;

@@ -7,20 +7,18 @@
 //! east towards north; the flyer stays level. The sensor looks down with columns along body x,
 //! so a frame's heading (clockwise from east) is −ψ.
 
+use nav_core::Prior;
 use nav_core::filter::{
     FilterConfig, FixMeasurement, InitialState, NavFilter, OffsetMeasurement, UpdateOutcome,
 };
 use nav_core::hazard::{AimDecision, CONFIRM_MAX_PIXEL_M, HazardConfig};
 use nav_core::odometry::KeyframePose;
-use nav_core::{Navigator, Prior};
 use rand::{RngExt, SeedableRng};
 use serde::{Deserialize, Serialize};
 
 use crate::evaluation::shard::f64_or_nan;
 use crate::flyer::frames::{FramePose, SensorModel, Terrain, synth_frame_on};
-use crate::flyer::onboard::{
-    FrameInput, GroundKeyframe, Workspace, capture_keyframe, run_frame, run_odometry,
-};
+use crate::flyer::onboard::{GroundKeyframe, MapNav, Workspace, capture_keyframe, run_odometry};
 use crate::terrain::landing::{SafetyThresholds, site_safety};
 
 /// The hazard map of the flight budget's capacity (the ground flies it too).
@@ -272,6 +270,13 @@ pub struct RunResult {
     /// Flight time, s.
     #[serde(deserialize_with = "f64_or_nan")]
     pub flight_s: f64,
+    /// Over an atlas: TRN frames located on more than one tile (the frame straddled a tile
+    /// edge and the first tile gave no fix).
+    #[serde(default)]
+    pub atlas_retries: usize,
+    /// Over an atlas: times the tile a TRN frame's report came from changed.
+    #[serde(default)]
+    pub atlas_tile_switches: usize,
     /// Horizontal distance from the landing point to the spot aimed at (the target, or the safe
     /// site chosen near it), m.
     #[serde(deserialize_with = "f64_or_nan")]
@@ -470,7 +475,7 @@ fn normal(rng: &mut rand_pcg::Pcg64) -> f64 {
 pub fn fly(
     run: usize,
     terrain: &Terrain<'_>,
-    nav: &Navigator<'_>,
+    nav: &MapNav<'_>,
     ws: &mut Workspace,
     cfg: &DescentConfig,
     release: [f64; 2],
@@ -509,15 +514,16 @@ pub fn fly(
         gyro_bias_sigma: cfg.gyro_bias_sigma.max(1e-7),
     };
     let mut filt = NavFilter::new(&init, cfg.filter);
-    let tile = nav.tile();
-    let th = tile.header();
-    let tile_px = th.pixel_m();
+    let (gx0, gy0, gpx, gpy) = nav.grid();
+    let tile_px = nav.pixel_m();
     let mut out = RunResult {
         run,
         release_m: release,
         target_m: target,
         hop_m: (target[0] - release[0]).hypot(target[1] - release[1]),
         flight_s: 0.0,
+        atlas_retries: 0,
+        atlas_tile_switches: 0,
         landing_err_m: f64::NAN,
         nav_err_at_landing_m: f64::NAN,
         nav_err_at_last_fix_m: f64::NAN,
@@ -558,6 +564,7 @@ pub fn fly(
     let max_steps = (1800.0 * cfg.imu_rate_hz) as usize;
     let mut landed = false;
     let mut key = Box::new(GroundKeyframe::new());
+    let mut last_tile: Option<u16> = None;
     let mut hazards = Box::new(GroundHazardMap::new());
     // Where guidance flies to (estimate space) and where that spot truly is.
     let (mut aim, mut aim_truth) = (target, target);
@@ -684,25 +691,25 @@ pub fn fly(
                 let pe = filt.position_m();
                 let pc = filt.horizontal_cov_m2();
                 let prior = Prior {
-                    center_tile_px: [
-                        ((pe[0] - th.origin_x_m) / th.pixel_x_m) as f32,
-                        ((pe[1] - th.origin_y_m) / th.pixel_y_m) as f32,
-                    ],
+                    center_tile_px: [((pe[0] - gx0) / gpx) as f32, ((pe[1] - gy0) / gpy) as f32],
                     sigma_px: (pc[0][0].max(pc[1][1]).sqrt() / tile_px) as f32,
                     heading_rad: (-filt.yaw_rad()) as f32,
                     heading_sigma_rad: filt.yaw_sigma_rad().max(0.5f64.to_radians()) as f32,
                     scale: (pixel_m / tile_px) as f32,
                     scale_sigma: 0.02,
                 };
-                let r = run_frame(
-                    nav,
+                let r = nav.locate(
                     ws,
-                    FrameInput::Dem(&frame.heights_m, frame.width, frame.height, pixel_m),
-                    Some(&prior),
-                )
-                .map_err(|e| anyhow::anyhow!("navigator: {e}"))?;
-                match r.report.outcome {
-                    Ok(f) => {
+                    (&frame.heights_m, frame.width, frame.height, pixel_m),
+                    &prior,
+                )?;
+                if let Some((t, tried)) = r.atlas_tile {
+                    out.atlas_retries += usize::from(tried > 1);
+                    out.atlas_tile_switches += usize::from(last_tile.is_some_and(|l| l != t));
+                    last_tile = Some(t);
+                }
+                match r.outcome {
+                    Some(Ok(f)) => {
                         // The fix's own covariance as nav-core reports it; the filter models
                         // the correlation of successive fixes over the same ground.
                         let cg = f.center_cov_geo_m2;
@@ -735,7 +742,7 @@ pub fn fly(
                             }
                         }
                     }
-                    Err(_) => {
+                    Some(Err(_)) | None => {
                         out.no_fixes += 1;
                         fix_state = 3;
                     }
@@ -772,7 +779,7 @@ pub fn fly(
                         pixel_m,
                         pixel_rel_sigma: KEYFRAME_PIXEL_REL_SIGMA,
                     };
-                    let surf = th.surf_config();
+                    let surf = nav.surf_config();
                     if capture_keyframe(ws, &mut key, input, &kp, &surf).is_ok() {
                         filt.set_keyframe();
                         key_truth = [p[0], p[1]];
@@ -794,7 +801,7 @@ pub fn fly(
                             KEYFRAME_PIXEL_REL_SIGMA,
                         )
                         .map_err(|e| anyhow::anyhow!("odometry: {e}"))?;
-                    let r = run_odometry(&key, nav.config(), ws, input, &prior)
+                    let r = run_odometry(&key, nav.nav_config(), ws, input, &prior)
                         .map_err(|e| anyhow::anyhow!("odometry: {e}"))?;
                     match r.offset {
                         Some(o) => {

@@ -202,3 +202,105 @@ pub fn with_big_stack<T: Send>(f: impl FnOnce() -> anyhow::Result<T> + Send) -> 
             .map_err(|_| anyhow::anyhow!("worker thread panicked"))?
     })
 }
+
+/// Most tiles a ground run's [`nav_core::atlas::MappedAtlas`] holds (a 64 km corridor of 4 km
+/// tiles; ≈ 0.2 KB of parsed handles each).
+pub const GROUND_ATLAS_TILES: usize = 256;
+
+/// The reference a closed-loop run navigates on: one tile, or an atlas of tiles.
+#[derive(Debug, Clone, Copy)]
+pub enum MapNav<'a> {
+    /// One reference tile.
+    Tile(&'a Navigator<'a>),
+    /// A flight atlas, every tile parsed once, with the atlas navigator.
+    Atlas(
+        &'a nav_core::atlas::MappedAtlas<'a, GROUND_ATLAS_TILES>,
+        &'a nav_core::atlas::AtlasNavigator,
+    ),
+}
+
+/// A frame located on a [`MapNav`]: the fix (or why none) and, over an atlas, which tile.
+#[derive(Debug, Clone, Copy)]
+pub struct MapFrame {
+    /// The fix, or why none (`None` over an atlas when no tile reaches the prior).
+    pub outcome: Option<Result<nav_core::Fix, nav_core::NoFix>>,
+    /// Over an atlas: the tile the report comes from, and how many tiles were tried.
+    pub atlas_tile: Option<(u16, u8)>,
+}
+
+impl MapNav<'_> {
+    /// The map grid: geo of pixel (0, 0)'s centre and the steps per column and row, metres.
+    pub fn grid(&self) -> (f64, f64, f64, f64) {
+        match self {
+            Self::Tile(n) => {
+                let h = n.tile().header();
+                (h.origin_x_m, h.origin_y_m, h.pixel_x_m, h.pixel_y_m)
+            }
+            Self::Atlas(a, _) => {
+                use nav_core::atlas::TileSource;
+                let h = a.atlas().header();
+                (h.origin_x_m, h.origin_y_m, h.pixel_x_m, h.pixel_y_m)
+            }
+        }
+    }
+    /// Mean pixel size of the map grid, metres.
+    pub fn pixel_m(&self) -> f64 {
+        let (_, _, px, py) = self.grid();
+        0.5 * (px.abs() + py.abs())
+    }
+    /// The SURF settings of the map's tiles.
+    pub fn surf_config(&self) -> SurfConfig {
+        match self {
+            Self::Tile(n) => n.tile().header().surf_config(),
+            Self::Atlas(a, _) => {
+                use nav_core::atlas::TileSource;
+                a.atlas().header().surf_config()
+            }
+        }
+    }
+    /// The navigator settings.
+    pub fn nav_config(&self) -> &NavConfig {
+        match self {
+            Self::Tile(n) => n.config(),
+            Self::Atlas(_, nav) => &nav.config().nav,
+        }
+    }
+    /// Locate a DEM frame under `prior` (map grid pixels).
+    pub fn locate(
+        &self,
+        ws: &mut Workspace,
+        frame: (&[f32], usize, usize, f64),
+        prior: &Prior,
+    ) -> anyhow::Result<MapFrame> {
+        match self {
+            Self::Tile(n) => {
+                let r = run_frame(
+                    n,
+                    ws,
+                    FrameInput::Dem(frame.0, frame.1, frame.2, frame.3),
+                    Some(prior),
+                )
+                .map_err(|e| anyhow::anyhow!("navigator: {e}"))?;
+                Ok(MapFrame {
+                    outcome: Some(r.report.outcome),
+                    atlas_tile: None,
+                })
+            }
+            Self::Atlas(atlas, nav) => {
+                let (z, w, h, px) = frame;
+                let dem = DemPatch::new_checked(z, w, h, px as f32)
+                    .map_err(|e| anyhow::anyhow!("navigator: {e}"))?;
+                let mut src = *atlas;
+                let r = match ws {
+                    Workspace::Flight(ws) => nav.locate_dem(&mut src, ws.as_mut(), &dem, prior),
+                    Workspace::Host(ws) => nav.locate_dem(&mut src, ws.as_mut(), &dem, prior),
+                }
+                .map_err(|e| anyhow::anyhow!("atlas navigator: {e}"))?;
+                Ok(MapFrame {
+                    outcome: r.report.map(|r| r.outcome),
+                    atlas_tile: r.tile.map(|t| (t, r.tried)),
+                })
+            }
+        }
+    }
+}

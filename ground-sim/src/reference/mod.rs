@@ -16,6 +16,7 @@ use crate::dem::{
 };
 use crate::reference::tile::{GeoGrid, build_tile};
 
+pub mod atlas;
 pub mod noise_floor;
 pub mod tile;
 
