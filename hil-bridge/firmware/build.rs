@@ -1,4 +1,5 @@
-//! Puts `memory.x` on the linker path and links the reference tile into flash.
+//! Puts `memory.x` on the linker path and links the reference tile and the flight atlas into
+//! flash.
 //!
 //! The tile comes from `UMBRA_HIL_TILE` (a path) or, by default, from the recorded frame set
 //! that `cargo run --release -p hil-bridge -- gen` writes to `target/hil/data/tile.bin`.
@@ -26,4 +27,17 @@ fn main() {
         )
     });
     fs::write(out.join("tile.bin"), bytes).expect("write tile");
+    // The flight atlas cut from the same map, written beside the tile by `gen`.
+    println!("cargo:rerun-if-env-changed=UMBRA_HIL_ATLAS");
+    let atlas = env::var_os("UMBRA_HIL_ATLAS")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| manifest.join("../../target/hil/data/atlas.bin"));
+    println!("cargo:rerun-if-changed={}", atlas.display());
+    let bytes = fs::read(&atlas).unwrap_or_else(|e| {
+        panic!(
+            "flight atlas {}: {e}\nwrite it first: cargo run --release -p hil-bridge -- gen",
+            atlas.display()
+        )
+    });
+    fs::write(out.join("atlas.bin"), bytes).expect("write atlas");
 }

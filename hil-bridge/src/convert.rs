@@ -1,11 +1,12 @@
 //! Conversions from nav-core's results to their wire mirrors. Every float is copied, never
 //! recomputed, so the wire bytes of a result are a bit-exact image of the navigator's output.
 
-use crate::job::{FinalPhase, HazardOutcome, JobOutput};
+use crate::job::{AtlasJobError, FinalPhase, HazardOutcome, JobOutput};
 use crate::msg::{
-    FrameResult, WireAimDecision, WireFix, WireHazard, WireHazardError, WireHazardStats,
+    FrameResult, WireAimDecision, WireAtlas, WireFix, WireHazard, WireHazardError, WireHazardStats,
     WireKeyframe, WireMatchStats, WireNavError, WireNoFix, WireOffset, WireOutcome, WireSafeSite,
 };
+use nav_core::atlas::AtlasNavError;
 use nav_core::frame::FrameError;
 use nav_core::hazard::{AimDecision, HazardError, HazardStats};
 use nav_core::odometry::{OdometryError, OffsetFix};
@@ -51,6 +52,7 @@ pub fn frame_result(frame_id: u32, r: &Result<FrameReport, NavError>) -> FrameRe
             },
             offset: None,
             hazard: None,
+            atlas: None,
         },
         Err(e) => refused(frame_id, nav_error(e)),
     }
@@ -75,6 +77,7 @@ fn blank(frame_id: u32, outcome: WireOutcome) -> FrameResult {
         match_stats: WireMatchStats::default(),
         offset: None,
         hazard: None,
+        atlas: None,
     }
 }
 
@@ -84,6 +87,26 @@ fn blank(frame_id: u32, outcome: WireOutcome) -> FrameResult {
 pub fn job_result(frame_id: u32, out: &JobOutput, fp: &FinalPhase) -> FrameResult {
     match out {
         JobOutput::Locate(r) => frame_result(frame_id, r),
+        JobOutput::AtlasLocate(Ok(a)) => match &a.report {
+            Some(rep) => FrameResult {
+                atlas: a.tile.map(|tile| WireAtlas {
+                    tile,
+                    tile_offset_px: a.tile_offset_px,
+                    candidates: a.candidates.count,
+                    tried: a.tried,
+                    straddles: a.candidates.straddles,
+                }),
+                ..frame_result(frame_id, &Ok(*rep))
+            },
+            None => refused(frame_id, WireNavError::OutsideAtlas),
+        },
+        JobOutput::AtlasLocate(Err(e)) => refused(
+            frame_id,
+            match e {
+                AtlasJobError::Nav(AtlasNavError::Nav(n)) => nav_error(n),
+                _ => WireNavError::Atlas,
+            },
+        ),
         JobOutput::Keyframe(Ok(())) => {
             let bytes = fp.keyframe.as_bytes();
             let features = fp.keyframe.tile().map_or(0, |t| t.len());

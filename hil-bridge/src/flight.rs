@@ -3,5 +3,6 @@
 //! workspace, keyframe and hazard map, so "bit-exact" compares the same computation.
 
 pub use nav_core::flight::{
-    HazardMap, Keyframe, MAX_FRAME_PX, MAX_FRAME_WIDTH, MAX_KEYPOINTS, MAX_MATCHES, Workspace,
+    ATLAS_TILES, ATLAS_TILES_PER_FRAME, HazardMap, Keyframe, MAX_FRAME_PX, MAX_FRAME_WIDTH,
+    MAX_KEYPOINTS, MAX_MATCHES, Workspace,
 };

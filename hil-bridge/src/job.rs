@@ -10,6 +10,10 @@
 //! together would not be. The keyframe and the hazard map persist between frames in [`FinalPhase`].
 
 use crate::flight::{HazardMap, Keyframe, Workspace};
+use nav_core::atlas::{AtlasConfig, AtlasNavError, AtlasNavigator, AtlasReport, MappedAtlas};
+
+/// The flight atlas as the target holds it: every tile parsed once at boot.
+pub type Atlas<'a> = MappedAtlas<'a, { crate::flight::ATLAS_TILES }>;
 use crate::msg::{FrameHeader, FrameJob};
 use nav_core::frame::FrameError;
 use nav_core::hazard::{AimDecision, HazardConfig, HazardError, HazardStats};
@@ -46,12 +50,25 @@ impl FinalPhase {
     }
 }
 
+/// Why an atlas job gave no report.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum AtlasJobError {
+    /// No atlas is linked.
+    NoAtlas,
+    /// The frame came without the prior that picks the tile.
+    NoPrior,
+    /// The frame, the configuration or a tile.
+    Nav(AtlasNavError),
+}
+
 /// What one frame's job gave (turned into a wire result by [`crate::convert::job_result`],
 /// outside the measured window).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum JobOutput {
     /// TRN on the reference tile.
     Locate(Result<FrameReport, NavError>),
+    /// TRN on the flight atlas.
+    AtlasLocate(Result<AtlasReport, AtlasJobError>),
     /// Keyframe capture.
     Keyframe(Result<(), OdometryError>),
     /// Odometry on the keyframe.
@@ -76,6 +93,7 @@ pub enum HazardOutcome {
 /// persistent state `fp`. Never panics; a malformed frame is a refusal in the output.
 pub fn execute(
     nav: &Navigator<'_>,
+    atlas: Option<&Atlas<'_>>,
     ws: &mut Workspace,
     fp: &mut FinalPhase,
     header: &FrameHeader,
@@ -91,12 +109,27 @@ pub fn execute(
     let prior = header.prior.as_ref().map(crate::convert::prior);
     match (&dem, &header.job) {
         (Err(e), FrameJob::Locate) => JobOutput::Locate(Err(NavError::Frame(*e))),
+        (Err(e), FrameJob::AtlasLocate) => JobOutput::AtlasLocate(Err(AtlasJobError::Nav(
+            AtlasNavError::Nav(NavError::Frame(*e)),
+        ))),
         (Err(e), FrameJob::Keyframe(_)) => JobOutput::Keyframe(Err(OdometryError::Frame(*e))),
         (Err(e), FrameJob::Odometry(_)) => JobOutput::Odometry(Err(OdometryError::Frame(*e))),
         (Err(e), FrameJob::Hazard(_) | FrameJob::Confirm(_)) => {
             JobOutput::Hazard(HazardOutcome::BadFrame(*e))
         }
         (Ok(d), FrameJob::Locate) => JobOutput::Locate(nav.locate_dem(ws, d, prior.as_ref())),
+        (Ok(d), FrameJob::AtlasLocate) => JobOutput::AtlasLocate(match (atlas, prior.as_ref()) {
+            (None, _) => Err(AtlasJobError::NoAtlas),
+            (_, None) => Err(AtlasJobError::NoPrior),
+            (Some(a), Some(p)) => {
+                let an = AtlasNavigator::new(AtlasConfig {
+                    nav: *nav.config(),
+                    max_tiles_per_frame: crate::flight::ATLAS_TILES_PER_FRAME,
+                });
+                an.locate_dem(&mut &*a, ws, d, p)
+                    .map_err(AtlasJobError::Nav)
+            }
+        }),
         (Ok(d), FrameJob::Keyframe(k)) => {
             let pose = KeyframePose {
                 heading_rad: k.heading_rad,

@@ -135,10 +135,14 @@ fn main() -> Result<()> {
             let set = hil_bridge::host::runner::load_or_generate(&opts)?;
             let tile = nav_core::Tile::parse(&set.tile).map_err(|e| anyhow::anyhow!("{e}"))?;
             let nav = nav_core::Navigator::new(tile, nav_core::NavConfig::default());
+            let atlas = Box::new(
+                hil_bridge::job::Atlas::new(&set.atlas).map_err(|e| anyhow::anyhow!("{e}"))?,
+            );
             let mut ws = Box::new(hil_bridge::host::runner::Workspace::new());
             let mut fp: Box<hil_bridge::job::FinalPhase> = Box::default();
             for f in &set.frames {
-                let r = hil_bridge::host::runner::host_result(&nav, &mut ws, &mut fp, f);
+                let r =
+                    hil_bridge::host::runner::host_result(&nav, Some(&atlas), &mut ws, &mut fp, f);
                 let mut bytes = postcard::to_stdvec(&r)?;
                 for ft in ws.features().as_slice() {
                     let k = &ft.keypoint;

@@ -72,6 +72,10 @@ pub struct HelloAck {
     pub max_frame_width: u16,
     /// Largest [`FrameChunk::data`] the target accepts, bytes.
     pub max_chunk_bytes: u16,
+    /// CRC-32 stored at the end of the linked flight atlas's index (0: no atlas).
+    pub atlas_crc: u32,
+    /// Tiles in that atlas.
+    pub atlas_tiles: u16,
 }
 
 /// How frame samples are encoded in the payload.
@@ -147,6 +151,11 @@ pub enum FrameJob {
     /// `CONFIRM_HALF_WINDOW_M`) and its decision with the aim as its own target. The aim, frame
     /// pixels `[x, y]`.
     Confirm([f32; 2]),
+    /// 5: terrain-relative navigation on the linked flight atlas
+    /// (`nav_core::atlas::AtlasNavigator::locate_dem`, flight `AtlasConfig`): the header's
+    /// prior, in atlas pixels, is required (it picks the tile). The fix comes in the pixels of
+    /// the tile named in [`FrameResult::atlas`].
+    AtlasLocate,
 }
 
 /// Where guidance aims and the planned target, frame pixels `[x, y]`.
@@ -328,6 +337,27 @@ pub enum WireNavError {
     NoKeyframe,
     /// The keyframe tile could not be written or read back.
     KeyframeTile,
+    /// An atlas job without an atlas linked, without a prior, or on a tile that does not read.
+    Atlas,
+    /// An atlas job whose prior no tile of the atlas reaches.
+    OutsideAtlas,
+}
+
+/// Which atlas tile a [`FrameJob::AtlasLocate`] frame was located on (mirrors
+/// `nav_core::atlas::AtlasReport`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct WireAtlas {
+    /// The tile whose report this is (the first that fixed, else the first tried).
+    pub tile: u16,
+    /// Atlas pixel of that tile's pixel (0, 0) `[col, row]`: add it to the fix's tile pixels.
+    pub tile_offset_px: [i32; 2],
+    /// Tiles ranked for the frame.
+    pub candidates: u8,
+    /// Tiles located on.
+    pub tried: u8,
+    /// No tile held the frame's whole reach.
+    pub straddles: bool,
 }
 
 /// A captured keyframe (T→H, in [`WireOutcome::Keyframe`]).
@@ -495,6 +525,8 @@ pub struct FrameResult {
     pub offset: Option<WireOffset>,
     /// The hazard map, for [`FrameJob::Hazard`].
     pub hazard: Option<WireHazard>,
+    /// The atlas tile, for [`FrameJob::AtlasLocate`].
+    pub atlas: Option<WireAtlas>,
 }
 
 /// What one frame cost on the target (T→H), sent before its [`FrameResult`].

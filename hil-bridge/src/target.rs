@@ -31,6 +31,10 @@ pub struct TargetInfo {
     pub tile_features: u32,
     /// Widest frame accepted, pixels.
     pub max_frame_width: u16,
+    /// CRC-32 at the end of the linked atlas's index (0: no atlas).
+    pub atlas_crc: u32,
+    /// Tiles in the linked atlas.
+    pub atlas_tiles: u16,
 }
 
 /// A complete, verified frame ready for the navigator.
@@ -315,6 +319,8 @@ impl<'b> TargetLink<'b> {
             max_frame_px: self.heights.len().min(u32::MAX as usize) as u32,
             max_frame_width: self.info.max_frame_width,
             max_chunk_bytes: MAX_CHUNK_BYTES as u16,
+            atlas_crc: self.info.atlas_crc,
+            atlas_tiles: self.info.atlas_tiles,
         };
         self.send(w, &Message::HelloAck(ack))?;
         if !self.session {

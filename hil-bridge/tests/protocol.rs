@@ -42,6 +42,28 @@ fn confirm_header() -> Message<'static> {
     })
 }
 
+/// An atlas frame's header (protocol v6's new job, with its required prior).
+fn atlas_header() -> Message<'static> {
+    Message::FrameHeader(FrameHeader {
+        frame_id: 15,
+        width: 200,
+        height: 200,
+        pixel_m: 10.0,
+        format: SampleFormat::HeightF32Le,
+        payload_bytes: 160_000,
+        payload_crc: 6,
+        prior: Some(WirePrior {
+            center_tile_px: [150.0, 150.0],
+            sigma_px: 2.5,
+            heading_rad: 0.5,
+            heading_sigma_rad: 0.035,
+            scale: 0.5,
+            scale_sigma: 0.01,
+        }),
+        job: FrameJob::AtlasLocate,
+    })
+}
+
 fn golden() -> Vec<(u16, Message<'static>, &'static str)> {
     vec![
         (
@@ -92,9 +114,28 @@ fn golden() -> Vec<(u16, Message<'static>, &'static str)> {
         (
             5,
             Message::FrameResult(hil_bridge::convert::refused(9, WireNavError::TooLarge)),
-            "00 02 05 05 06 09 02 02 01 01 01 01 01 01 01 01 01 01 01 01 05 3f 88 25 d7 00",
+            "00 02 05 05 06 09 02 02 01 01 01 01 01 01 01 01 01 01 01 01 01 05 38 e7 b3 64 00",
         ),
         (6, Message::Shutdown, "00 02 06 06 0b 28 7c 1e 6c 00"),
+        (
+            8,
+            atlas_header(),
+            "00 02 08 07 02 0f c8 01 c8 01 01 03 20 41 06 80 e2 09 06 01 01 03 16 43 01 03 16 43 01 03 20 40 01 01 06 3f 29 5c 0f 3d 01 01 0b 3f 0a d7 23 3c 05 a1 5c fc 95 00",
+        ),
+        (
+            9,
+            Message::FrameResult(FrameResult {
+                atlas: Some(WireAtlas {
+                    tile: 3,
+                    tile_offset_px: [105, 0],
+                    candidates: 4,
+                    tried: 2,
+                    straddles: true,
+                }),
+                ..hil_bridge::convert::refused(10, WireNavError::OutsideAtlas)
+            }),
+            "00 02 09 05 06 0a 02 09 01 01 01 01 01 01 01 01 01 01 01 01 05 01 03 d2 01 08 04 02 01 19 e6 88 48 00",
+        ),
         (
             7,
             confirm_header(),
@@ -106,7 +147,7 @@ fn golden() -> Vec<(u16, Message<'static>, &'static str)> {
 #[test]
 fn golden_vectors_encode_and_decode() {
     assert_eq!(
-        PROTOCOL_VERSION, 5,
+        PROTOCOL_VERSION, 6,
         "a version bump needs new golden vectors"
     );
     for (seq, msg, bytes) in golden() {
@@ -163,6 +204,7 @@ fn every_message() -> Vec<Message<'static>> {
         },
         offset: None,
         hazard: None,
+        atlas: None,
     };
     // The largest result: an odometry fix with its offset (a hazard map comes in a result of
     // its own, but both together must fit too).
@@ -192,6 +234,13 @@ fn every_message() -> Vec<Message<'static>> {
                 from_target_m: 11.8,
             }),
         )),
+        atlas: Some(WireAtlas {
+            tile: 4095,
+            tile_offset_px: [-1, i32::MAX],
+            candidates: 4,
+            tried: 2,
+            straddles: true,
+        }),
         ..result
     };
     vec![
@@ -208,6 +257,8 @@ fn every_message() -> Vec<Message<'static>> {
             max_frame_px: 40_000,
             max_frame_width: 200,
             max_chunk_bytes: MAX_CHUNK_BYTES as u16,
+            atlas_crc: 0x80dd_cb9b,
+            atlas_tiles: 16,
         }),
         Message::FrameHeader(FrameHeader {
             frame_id: 3,
@@ -432,6 +483,8 @@ fn info() -> TargetInfo {
         tile_crc: 0x1234_5678,
         tile_features: 9,
         max_frame_width: 64,
+        atlas_crc: 0,
+        atlas_tiles: 0,
     }
 }
 

@@ -346,6 +346,9 @@ pub struct Candidates {
     pub count: u8,
     /// The frame's reach: half its diagonal plus 3σ of the prior, atlas px.
     pub reach_px: f32,
+    /// Half the frame's diagonal, atlas px: a frame at the prior centre lies wholly inside a
+    /// tile in which that centre is at least this deep.
+    pub half_diag_px: f32,
     /// No tile holds the whole reach: the frame may straddle a tile edge.
     pub straddles: bool,
 }
@@ -485,6 +488,7 @@ impl<'a> Atlas<'a> {
             depth_px: [f32::NEG_INFINITY; MAX_ATLAS_CANDIDATES],
             count: 0,
             reach_px: reach as f32,
+            half_diag_px: half_diag as f32,
             straddles: false,
         };
         if !(cx.is_finite() && cy.is_finite() && reach.is_finite() && reach >= 0.0) {
@@ -760,7 +764,7 @@ impl Default for AtlasConfig {
     fn default() -> Self {
         Self {
             nav: NavConfig::default(),
-            max_tiles_per_frame: 2,
+            max_tiles_per_frame: crate::flight::ATLAS_TILES_PER_FRAME,
         }
     }
 }
@@ -810,9 +814,25 @@ impl AtlasNavigator {
     }
 
     /// Locate a DEM frame on the atlas under `prior` (atlas pixels; a prior is required: it is
-    /// what picks the tile). The first candidate gets a full [`Navigator::locate_dem`]; when
-    /// it gives no fix and the frame straddles, the next candidates (up to
-    /// `max_tiles_per_frame` in all) are tried with the same extracted features.
+    /// what picks the tile).
+    ///
+    /// The frame is extracted once. On the deepest tile its feature path runs (matching,
+    /// consensus, refinement, prior gate: [`Navigator::locate_dem`] without the area search).
+    /// When that gives no fix:
+    ///
+    /// * if the frame, at the prior's centre, lies wholly inside that tile, the tile's area
+    ///   search runs, exactly as on a single tile (the prior's 3σ may cross the tile edge, but
+    ///   the search looks near the centre only);
+    /// * otherwise the frame hangs over the tile's edge: when it has at least the gate's
+    ///   `min_matches` features (fewer fix on no tile by features) and its failure was cheap
+    ///   (no dense refinement ran), the next candidates' feature paths follow, up to
+    ///   `max_tiles_per_frame` tiles in all, first fix taken; else the deepest tile's area
+    ///   search runs.
+    ///
+    /// A frame's work is one extraction, the feature paths, and at most one expensive stage (one
+    /// consensus's refinement, or the area search, never both neighbours and the search), as on
+    /// a single tile; the extra is the cheap failures' matching and consensus (docs/bounds.md).
+    /// A frame that needs one tile only gives bit for bit what [`Navigator::locate_dem`] gives.
     pub fn locate_dem<
         S: TileSource,
         const P: usize,
@@ -835,33 +855,54 @@ impl AtlasNavigator {
             report: None,
         };
         let budget = (self.cfg.max_tiles_per_frame as usize).clamp(1, MAX_ATLAS_CANDIDATES);
-        let mut k = 1;
-        for (n, &index) in candidates.as_slice().iter().take(budget).enumerate() {
-            let e = source
-                .atlas()
-                .entry(index as usize)
-                .ok_or(AtlasError::NoSuchTile { index })?;
-            let tile = source.tile(index)?;
-            let nav = Navigator::new(tile, self.cfg.nav);
-            let tp = e.tile_prior(prior);
-            let report = if n == 0 {
-                k = nav.bin_factor(dem.pixel_m());
-                extract_dem(&nav, ws, dem, k)?;
-                nav.locate_extracted_dem(ws, dem.width(), dem.height(), k, Some(&tp), true)?
-            } else {
-                nav.locate_extracted_dem(ws, dem.width(), dem.height(), k, Some(&tp), false)?
-            };
-            out.tried = n as u8 + 1;
-            let fixed = report.outcome.is_ok();
-            if n == 0 || fixed {
-                out.tile = Some(index);
-                out.tile_offset_px = [e.col0, e.row0];
-                out.report = Some(report);
+        let (w, h) = (dem.width(), dem.height());
+        let Some(&first) = candidates.as_slice().first() else {
+            return Ok(out);
+        };
+        let e = source
+            .atlas()
+            .entry(first as usize)
+            .ok_or(AtlasError::NoSuchTile { index: first })?;
+        let tp = e.tile_prior(prior);
+        let (k, mut report, neighbours) = {
+            let nav = Navigator::new(source.tile(first)?, self.cfg.nav);
+            let k = nav.bin_factor(dem.pixel_m());
+            extract_dem(&nav, ws, dem, k)?;
+            let mut report = nav.locate_extracted_dem(ws, w, h, k, Some(&tp), false)?;
+            let hangs_over = candidates.depth_px[0] < candidates.half_diag_px;
+            let neighbours = report.outcome.is_err()
+                && candidates.straddles
+                && hangs_over
+                && candidates.count > 1
+                && budget > 1
+                && report.features >= self.cfg.nav.gate.min_matches
+                && report.refine.is_none();
+            if report.outcome.is_err() && !neighbours {
+                nav.area_search_extracted(ws, &mut report, w, h, k, Some(&tp))?;
             }
-            if fixed {
-                break;
+            (k, report, neighbours)
+        };
+        out.tried = 1;
+        out.tile = Some(first);
+        out.tile_offset_px = [e.col0, e.row0];
+        if neighbours {
+            for &index in candidates.as_slice().iter().take(budget).skip(1) {
+                let e = source
+                    .atlas()
+                    .entry(index as usize)
+                    .ok_or(AtlasError::NoSuchTile { index })?;
+                let nav = Navigator::new(source.tile(index)?, self.cfg.nav);
+                let r = nav.locate_extracted_dem(ws, w, h, k, Some(&e.tile_prior(prior)), false)?;
+                out.tried += 1;
+                if r.outcome.is_ok() {
+                    out.tile = Some(index);
+                    out.tile_offset_px = [e.col0, e.row0];
+                    report = r;
+                    break;
+                }
             }
         }
+        out.report = Some(report);
         Ok(out)
     }
 }

@@ -38,3 +38,13 @@ pub const MAX_HAZARD_SITES: usize = 100 * 100;
 
 /// The hazard map of the flight configuration (20 KB).
 pub type HazardMap = crate::hazard::HazardMap<MAX_HAZARD_SITES>;
+
+/// Tiles of the flight atlas the target keeps parsed ([`crate::atlas::MappedAtlas`]): a 16 km
+/// corridor in 4 km cores. ≈ 0.2 KB of RAM per tile handle; the tiles stay in flash.
+pub const ATLAS_TILES: usize = 16;
+
+/// Most atlas tiles one frame is located on ([`crate::atlas::AtlasConfig::max_tiles_per_frame`]):
+/// the deepest tile, then one neighbour when the frame straddles a tile edge and the first gave
+/// no fix. The neighbour's try reuses the frame's extraction and skips the area search, so it
+/// costs matching, consensus and refinement only (docs/bounds.md, atlas frames).
+pub const ATLAS_TILES_PER_FRAME: u8 = 2;

@@ -352,6 +352,27 @@ impl<'t> Navigator<'t> {
         Ok(report)
     }
 
+    /// The area search of [`Self::locate_dem`] on a report of [`Self::locate_extracted_dem`]
+    /// made without it (same workspace, same frame).
+    pub(crate) fn area_search_extracted<
+        const P: usize,
+        const W: usize,
+        const K: usize,
+        const M: usize,
+    >(
+        &self,
+        ws: &mut NavWorkspace<P, W, K, M>,
+        report: &mut FrameReport,
+        width: usize,
+        height: usize,
+        k: usize,
+        prior: Option<&Prior>,
+    ) -> Result<(), NavError> {
+        let img = ws.slope.image()?;
+        self.area_search(report, &img, k, width, height, prior);
+        Ok(())
+    }
+
     /// Locate a slope image.
     pub fn locate_slope<const P: usize, const W: usize, const K: usize, const M: usize>(
         &self,

@@ -1,8 +1,8 @@
 //! # Umbra HIL firmware
 //!
 //! nav-core on a Cortex-M (QEMU `mps2-an386` Cortex-M4 or `mps2-an500` Cortex-M7), the
-//! reference tile linked into flash, frames received over the hil-bridge link, each frame's job
-//! run (TRN on the tile, keyframe capture, odometry on the keyframe, hazard map: see
+//! reference tile and a flight atlas linked into flash, frames received over the hil-bridge
+//! link, each frame's job run (TRN on the tile or on the atlas, keyframe capture, odometry on the keyframe, hazard map: see
 //! [`hil_bridge::job`]), its result (fix or typed no-fix, offset, hazard map digest and site)
 //! and its cost sent back.
 //!
@@ -37,9 +37,10 @@ use cortex_m_semihosting::debug::{self, EXIT_FAILURE, EXIT_SUCCESS};
 use cortex_m_semihosting::hprintln;
 use hil_bridge::convert;
 use hil_bridge::flight::{MAX_FRAME_PX, MAX_FRAME_WIDTH, Workspace};
-use hil_bridge::job::{self, FinalPhase};
+use hil_bridge::job::{self, Atlas, FinalPhase};
 use hil_bridge::msg::{FrameCost, Message};
 use hil_bridge::target::{Event, TargetInfo, TargetLink};
+use nav_core::atlas::TileSource;
 use nav_core::{NavConfig, Navigator, Tile};
 #[cfg(not(feature = "uart-link"))]
 use semihosting::HostFile;
@@ -52,6 +53,8 @@ pub const CORE_HZ: u32 = 25_000_000;
 #[repr(C, align(4))]
 struct Aligned<T: ?Sized>(T);
 static TILE: &Aligned<[u8]> = &Aligned(*include_bytes!(concat!(env!("OUT_DIR"), "/tile.bin")));
+/// The flight atlas (index and tiles), 4-byte aligned in flash.
+static ATLAS: &Aligned<[u8]> = &Aligned(*include_bytes!(concat!(env!("OUT_DIR"), "/atlas.bin")));
 
 /// Wire-format version stamped into the binary (find it with `strings`).
 #[used]
@@ -98,6 +101,14 @@ fn main() -> ! {
         Err(_) => fail("the linked reference tile does not parse"),
     };
     let nav = Navigator::new(tile, NavConfig::default());
+    // Every atlas tile validated once, here (CRC and features), never again per frame.
+    let atlas = match Atlas::new(&ATLAS.0) {
+        Ok(a) => a,
+        Err(_) => fail("the linked flight atlas does not parse"),
+    };
+    let atlas_crc =
+        nav_core::tile::stored_crc(ATLAS.0.get(..atlas.atlas().index_len()).unwrap_or(&[]))
+            .unwrap_or(0);
     #[cfg(not(feature = "uart-link"))]
     let (Ok(mut rx), Ok(mut tx)) = (HostFile::link_rx(), HostFile::link_tx()) else {
         fail("cannot open hil-link.rx / hil-link.tx in QEMU's working directory");
@@ -109,6 +120,8 @@ fn main() -> ! {
         tile_crc: nav_core::tile::stored_crc(&TILE.0).unwrap_or(0),
         tile_features: tile.len() as u32,
         max_frame_width: MAX_FRAME_WIDTH as u16,
+        atlas_crc,
+        atlas_tiles: atlas.atlas().len() as u16,
     };
     let mut link = TargetLink::new(info, HEIGHTS);
     let ws = WORKSPACE;
@@ -120,7 +133,7 @@ fn main() -> ! {
                 let h = f.header;
                 let t0 = clock.now();
                 hil_frame_begin(window);
-                let out = job::execute(&nav, ws, fp, &h, link.heights_m());
+                let out = job::execute(&nav, Some(&atlas), ws, fp, &h, link.heights_m());
                 hil_frame_end(window);
                 let cycles = clock.now().wrapping_sub(t0);
                 let cost = FrameCost {

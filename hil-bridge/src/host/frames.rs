@@ -34,6 +34,15 @@ pub const TILE_PIXEL_M: f64 = 20.0;
 pub const FRAMES_FORMAT_VERSION: u32 = 3;
 /// Terrain seed.
 pub const TERRAIN_SEED: u64 = 8;
+/// Core side of the HIL atlas's tiles, tile pixels (the 300 px map in 2 × 2 tiles).
+pub const ATLAS_CORE_PX: usize = 150;
+/// Overlap beyond each core edge, tile pixels (900 m): less than a 10 m frame's half-diagonal
+/// (71 px), so frames near the middle straddle tile edges, as the sequence means them to.
+pub const ATLAS_MARGIN_PX: usize = 45;
+/// Frames of the atlas sequence across the tile edges (plus [`ATLAS_GENTLE_FRAMES`]).
+pub const ATLAS_FRAMES: usize = 8;
+/// Gentle frames at the atlas tiles' common corner.
+pub const ATLAS_GENTLE_FRAMES: usize = 2;
 /// Gentle-terrain frames (relief scaled by [`GENTLE_RELIEF`]) sent with a prior.
 pub const GENTLE_FRAMES: usize = 3;
 /// Height scale of the gentle frames: slopes become about a fifth of the tile's, below the
@@ -84,6 +93,20 @@ pub enum FrameKind {
     /// Final phase worst case for the confirmation: gentle ground, every footprint of the
     /// window read twice, and a boulder on the aim.
     StressConfirm,
+    /// A frame of the atlas sequence: terrain crossing the atlas's tile edges, with a prior in
+    /// atlas pixels ([`FrameJob::AtlasLocate`]).
+    AtlasCrossing,
+    /// The atlas sequence's gentle frames (relief scaled by [`GENTLE_RELIEF`]) at the tiles'
+    /// common corner: the first tile may give no fix (area search included), and a neighbour
+    /// is tried.
+    AtlasGentle,
+    /// An atlas frame after a long coast: the prior (σ 30 px = 600 m) sits 100 px short of
+    /// the truth, deeper in a tile the frame barely touches, so the first tile gives no fix
+    /// (area search included) and its neighbour is tried.
+    AtlasRetry,
+    /// A stress frame (no terrain) at the tiles' common corner with a prior: features that
+    /// match nothing on the deepest tile, so the neighbours' feature paths run too.
+    AtlasStress,
 }
 
 /// Ground truth of a terrain frame.
@@ -136,6 +159,9 @@ pub struct Frame {
 pub struct FrameSet {
     /// Reference tile blob (linked into the firmware).
     pub tile: Vec<u8>,
+    /// The flight atlas cut from the same map (linked into the firmware too): 2 × 2 tiles of
+    /// [`ATLAS_CORE_PX`] cores and [`ATLAS_MARGIN_PX`] margins.
+    pub atlas: Vec<u8>,
     /// Frames in link order.
     pub frames: Vec<Frame>,
 }
@@ -461,8 +487,159 @@ pub fn generate_set(terrain_frames: usize) -> Result<FrameSet> {
             heights_m: stress(kind, 77 + i as u64),
         });
     }
+    let (atlas, _) = ground_sim::reference::atlas::build_atlas(
+        &tile,
+        ground_sim::reference::atlas::AtlasLayout {
+            core_px: ATLAS_CORE_PX,
+            margin_px: ATLAS_MARGIN_PX,
+        },
+        MAX_TILE_FEATURES,
+    )
+    .context("atlas")?;
+    atlas_frames(z, &mut frames);
     final_phase_frames(&dem, &mut frames)?;
-    Ok(FrameSet { tile, frames })
+    Ok(FrameSet {
+        tile,
+        atlas,
+        frames,
+    })
+}
+
+/// The atlas sequence: frames along a diagonal through the point where the four tiles meet
+/// (tile pixels (85, 105) to (215, 195)), with the priors of a filter in cruise (σ 2.5 px =
+/// 50 m, drawn about 1σ off), then the gentle frames at the corner.
+fn atlas_frames(z: &[f32], frames: &mut Vec<Frame>) {
+    let n = ATLAS_FRAMES + ATLAS_GENTLE_FRAMES;
+    for k in 0..n {
+        let gentle = k >= ATLAS_FRAMES;
+        let t = if gentle {
+            0.5 + 0.03 * (k - ATLAS_FRAMES) as f64
+        } else {
+            k as f64 / (ATLAS_FRAMES - 1) as f64
+        };
+        let (x, y) = (85.0 + 130.0 * t, 105.0 + 90.0 * t);
+        let heading = (20.0 + 37.0 * k as f64).rem_euclid(360.0).to_radians();
+        let mut heights = cut(z, 2.0 * x + 0.5, 2.0 * y + 0.5, heading);
+        if gentle {
+            let mean = heights.iter().map(|&h| h as f64).sum::<f64>() / heights.len() as f64;
+            for h in &mut heights {
+                *h = (mean + (*h as f64 - mean) * GENTLE_RELIEF as f64) as f32;
+            }
+        }
+        let truth = Truth {
+            center_tile_px: [x, y],
+            heading_rad: heading,
+            scale: FRAME_PIXEL_M as f64 / TILE_PIXEL_M,
+        };
+        let prior = crate::msg::WirePrior {
+            center_tile_px: [x as f32 + 2.0, y as f32 - 1.5],
+            sigma_px: 2.5,
+            heading_rad: heading as f32 + 0.02,
+            heading_sigma_rad: 0.035,
+            scale: 0.5,
+            scale_sigma: 0.01,
+        };
+        push_atlas_frame(frames, k, gentle, heights, truth, prior);
+    }
+    // The coast: truth at (240, 120), prior at (140, 121) with σ 30 px.
+    let heading = 75f64.to_radians();
+    let heights = cut(z, 480.5, 240.5, heading);
+    let truth = Truth {
+        center_tile_px: [240.0, 120.0],
+        heading_rad: heading,
+        scale: FRAME_PIXEL_M as f64 / TILE_PIXEL_M,
+    };
+    let prior = crate::msg::WirePrior {
+        center_tile_px: [140.0, 121.0],
+        sigma_px: 30.0,
+        heading_rad: heading as f32 + 0.02,
+        heading_sigma_rad: 0.035,
+        scale: 0.5,
+        scale_sigma: 0.01,
+    };
+    let id = frames.len() as u32;
+    frames.push(Frame {
+        meta: FrameMeta {
+            id,
+            name: "atlas-retry-coast".into(),
+            kind: FrameKind::AtlasRetry,
+            width: FRAME_SIDE as u16,
+            height: FRAME_SIDE as u16,
+            pixel_m: FRAME_PIXEL_M,
+            truth: Some(truth),
+            prior: Some(prior),
+            job: FrameJob::AtlasLocate,
+            truth_offset_m: None,
+        },
+        heights_m: heights,
+    });
+    // The textured stress frame at the corner: every neighbour within the budget is tried.
+    for (kind, seed) in [(FrameKind::Textured, 79), (FrameKind::MaxKeypoints, 80)] {
+        let id = frames.len() as u32;
+        frames.push(Frame {
+            meta: FrameMeta {
+                id,
+                name: format!(
+                    "atlas-stress-{}",
+                    serde_json::to_string(&kind)
+                        .unwrap_or_default()
+                        .trim_matches('"')
+                ),
+                kind: FrameKind::AtlasStress,
+                width: FRAME_SIDE as u16,
+                height: FRAME_SIDE as u16,
+                pixel_m: FRAME_PIXEL_M,
+                truth: None,
+                prior: Some(crate::msg::WirePrior {
+                    center_tile_px: [150.0, 150.0],
+                    sigma_px: 8.0,
+                    heading_rad: 0.3,
+                    heading_sigma_rad: 0.1,
+                    scale: 0.5,
+                    scale_sigma: 0.03,
+                }),
+                job: FrameJob::AtlasLocate,
+                truth_offset_m: None,
+            },
+            heights_m: stress(kind, seed),
+        });
+    }
+}
+
+fn push_atlas_frame(
+    frames: &mut Vec<Frame>,
+    k: usize,
+    gentle: bool,
+    heights: Vec<f32>,
+    truth: Truth,
+    prior: crate::msg::WirePrior,
+) {
+    let heading = truth.heading_rad;
+    {
+        frames.push(Frame {
+            meta: FrameMeta {
+                id: frames.len() as u32,
+                name: format!(
+                    "atlas-{}{k:02}-{:03}deg",
+                    if gentle { "gentle-" } else { "" },
+                    heading.to_degrees().round() as i64
+                ),
+                kind: if gentle {
+                    FrameKind::AtlasGentle
+                } else {
+                    FrameKind::AtlasCrossing
+                },
+                width: FRAME_SIDE as u16,
+                height: FRAME_SIDE as u16,
+                pixel_m: FRAME_PIXEL_M,
+                truth: Some(truth),
+                prior: Some(prior),
+                job: FrameJob::AtlasLocate,
+                truth_offset_m: None,
+            },
+            heights_m: heights,
+        });
+    }
 }
 
 /// Seed of the final phase's landing zone and frame noise.
@@ -671,6 +848,7 @@ impl FrameSet {
     pub fn write(&self, dir: &Path) -> Result<()> {
         fs::create_dir_all(dir)?;
         fs::write(dir.join("tile.bin"), &self.tile)?;
+        fs::write(dir.join("atlas.bin"), &self.atlas)?;
         let mut bin = Vec::new();
         bin.extend_from_slice(b"UMBRAFRM");
         bin.extend_from_slice(&FRAMES_FORMAT_VERSION.to_le_bytes());
@@ -691,6 +869,7 @@ impl FrameSet {
     /// Read a set written by [`FrameSet::write`].
     pub fn read(dir: &Path) -> Result<Self> {
         let tile = fs::read(dir.join("tile.bin")).context("tile.bin")?;
+        let atlas = fs::read(dir.join("atlas.bin")).context("atlas.bin")?;
         let metas: Vec<FrameMeta> =
             serde_json::from_slice(&fs::read(dir.join("frames.json")).context("frames.json")?)?;
         let bin = fs::read(dir.join("frames.bin")).context("frames.bin")?;
@@ -711,6 +890,10 @@ impl FrameSet {
                 .collect();
             frames.push(Frame { meta, heights_m });
         }
-        Ok(Self { tile, frames })
+        Ok(Self {
+            tile,
+            atlas,
+            frames,
+        })
     }
 }

@@ -5,7 +5,7 @@
 use super::frames::{Frame, FrameSet};
 use super::link::{Fault, HostCounters, HostLink, Incoming, spawn_reader};
 use crate::convert;
-use crate::job::FinalPhase;
+use crate::job::{Atlas, FinalPhase};
 use crate::msg::{
     FrameChunk, FrameCost, FrameHeader, FrameJob, FrameResult, Hello, Message, SampleFormat,
     Status, WireAimDecision, WireHazard, WireOutcome,
@@ -13,6 +13,7 @@ use crate::msg::{
 use crate::packet::MAX_CHUNK_BYTES;
 use crate::target::payload_crc;
 use anyhow::{Context, Result, bail};
+use nav_core::atlas::TileSource;
 use nav_core::{NavConfig, Navigator, Tile};
 use object::{Object, ObjectSection, ObjectSymbol};
 use serde::Serialize;
@@ -117,6 +118,10 @@ pub struct FrameRecord {
     /// Hazard map: the aim's distance from the target after the decision, metres (0: the aim
     /// on the target was kept; null: no site within reach).
     pub site_from_target_m: Option<f32>,
+    /// Atlas frames: the tile the result comes from.
+    pub atlas_tile: Option<u16>,
+    /// Atlas frames: tiles located on.
+    pub atlas_tried: Option<u8>,
 }
 
 /// The run's report (written as JSON).
@@ -140,6 +145,8 @@ pub struct Report {
     pub flash_bytes: u64,
     /// Of the flash: the reference tile, bytes.
     pub tile_bytes: u64,
+    /// Of the flash: the flight atlas (index and tiles), bytes.
+    pub atlas_bytes: u64,
     /// Deepest stack use, bytes.
     pub stack_peak_bytes: u32,
     /// Link faults injected and recovered from.
@@ -174,6 +181,7 @@ pub fn load_or_generate(opts: &RunOptions) -> Result<FrameSet> {
         && let Ok(set) = FrameSet::read(&dir)
         && nav_core::Tile::parse(&set.tile)
             .is_ok_and(|t| t.header().smoothing_m == super::frames::tile_smoothing_m() as f32)
+        && Atlas::new(&set.atlas).is_ok()
     {
         return Ok(set);
     }
@@ -226,7 +234,8 @@ pub fn build_firmware(opts: &RunOptions) -> Result<PathBuf> {
         } else {
             &[][..]
         })
-        .env("UMBRA_HIL_TILE", opts.data_dir().join("tile.bin"));
+        .env("UMBRA_HIL_TILE", opts.data_dir().join("tile.bin"))
+        .env("UMBRA_HIL_ATLAS", opts.data_dir().join("atlas.bin"));
     // Settings of an outer `cargo run` must not leak into the firmware build.
     for var in [
         "CARGO_TARGET_DIR",
@@ -353,13 +362,14 @@ pub fn qemu_command(
 /// host's own final-phase state `fp`, through the same wire conversion.
 pub fn host_result(
     nav: &Navigator<'_>,
+    atlas: Option<&Atlas<'_>>,
     ws: &mut Workspace,
     fp: &mut FinalPhase,
     f: &Frame,
 ) -> FrameResult {
     let payload: Vec<u8> = f.heights_m.iter().flat_map(|h| h.to_le_bytes()).collect();
     let header = frame_header(f, &payload);
-    let out = crate::job::execute(nav, ws, fp, &header, &f.heights_m);
+    let out = crate::job::execute(nav, atlas, ws, fp, &header, &f.heights_m);
     convert::job_result(f.meta.id, &out, fp)
 }
 
@@ -380,13 +390,15 @@ fn job_name(f: &Frame) -> String {
         FrameJob::Odometry(_) => "odometry",
         FrameJob::Hazard(_) => "hazard",
         FrameJob::Confirm(_) => "confirm",
+        FrameJob::AtlasLocate => "atlas",
     }
     .into()
 }
 
 /// Pick the frames to run: of the TRN frames, the first `n − stress` terrain frames and (up to
-/// `n`) the stress frames; the final-phase chain (keyframes, odometry, hazard map) always runs
-/// whole, after them, since each of its frames needs the keyframe before it.
+/// `n`) the stress frames; the atlas sequence and the final-phase chain (keyframes, odometry,
+/// hazard map) always run whole, after them (a sequence crosses tile edges in order, and each
+/// final-phase frame needs the keyframe before it).
 fn select(set: &FrameSet, n: Option<usize>) -> Vec<&Frame> {
     let all: Vec<&Frame> = set.frames.iter().collect();
     let Some(n) = n else { return all };
@@ -478,6 +490,10 @@ pub fn run(opts: &RunOptions) -> Result<Report> {
     let facts = elf_facts(&elf)?;
     let tile = Tile::parse(&set.tile).map_err(|e| anyhow::anyhow!("tile: {e}"))?;
     let nav = Navigator::new(tile, NavConfig::default());
+    let atlas: Box<Atlas<'_>> =
+        Box::new(Atlas::new(&set.atlas).map_err(|e| anyhow::anyhow!("atlas: {e}"))?);
+    let atlas_crc =
+        nav_core::tile::stored_crc(&set.atlas[..atlas.atlas().index_len()]).unwrap_or(0);
     let mut ws: Box<Workspace> = Box::new(Workspace::new());
     let mut fp: Box<FinalPhase> = Box::default();
 
@@ -585,6 +601,14 @@ pub fn run(opts: &RunOptions) -> Result<Report> {
             ack.tile_crc
         );
     }
+    if ack.atlas_crc != atlas_crc || usize::from(ack.atlas_tiles) != atlas.atlas().len() {
+        bail!(
+            "the firmware's atlas (index CRC {:08x}, {} tiles) is not this frame set's ({atlas_crc:08x}, {})",
+            ack.atlas_crc,
+            ack.atlas_tiles,
+            atlas.atlas().len()
+        );
+    }
     say(
         opts.progress,
         format!(
@@ -652,12 +676,19 @@ pub fn run(opts: &RunOptions) -> Result<Report> {
             _ => bail!("frame {id}: no cost"),
         };
         costs.push((id, cost));
-        let host = host_result(&nav, &mut ws, &mut fp, f);
+        let host = host_result(&nav, Some(&atlas), &mut ws, &mut fp, f);
         let bit_exact = postcard::to_stdvec(&host)? == postcard::to_stdvec(&got)?;
         let (pos_err, head_err) = match (&got.outcome, &f.meta.truth) {
             (WireOutcome::Fix(fx), Some(t)) => {
-                let dx = fx.center_tile_px[0] - t.center_tile_px[0];
-                let dy = fx.center_tile_px[1] - t.center_tile_px[1];
+                // Atlas fixes are in their tile's pixels; the truth is in atlas pixels.
+                let off = got.atlas.map_or([0.0; 2], |a| {
+                    [
+                        f64::from(a.tile_offset_px[0]),
+                        f64::from(a.tile_offset_px[1]),
+                    ]
+                });
+                let dx = fx.center_tile_px[0] + off[0] - t.center_tile_px[0];
+                let dy = fx.center_tile_px[1] + off[1] - t.center_tile_px[1];
                 let dh = (fx.heading_rad - t.heading_rad)
                     .to_degrees()
                     .rem_euclid(360.0);
@@ -713,8 +744,19 @@ pub fn run(opts: &RunOptions) -> Result<Report> {
             hazard_sites,
             hazard_safe_frac,
             site_from_target_m,
+            atlas_tile: got.atlas.map(|a| a.tile),
+            atlas_tried: got.atlas.map(|a| a.tried),
         });
         let mut extra = String::new();
+        if let Some(a) = got.atlas {
+            extra.push_str(&format!(
+                "  atlas tile {} ({} tried of {}{})",
+                a.tile,
+                a.tried,
+                a.candidates,
+                if a.straddles { ", straddles" } else { "" }
+            ));
+        }
         if let Some(e) = offset_error_m {
             extra.push_str(&format!(
                 "  offset err {e:.2} m (σ {:.2})",
@@ -805,6 +847,7 @@ pub fn run(opts: &RunOptions) -> Result<Report> {
         static_ram_bytes: facts.static_ram,
         flash_bytes: facts.flash,
         tile_bytes: set.tile.len() as u64,
+        atlas_bytes: set.atlas.len() as u64,
         stack_peak_bytes: records
             .iter()
             .map(|r| r.stack_peak_bytes)
