@@ -34,6 +34,8 @@ fuzz_target!(|data: &[u8]| {
         tile_crc: 0,
         tile_features: 0,
         max_frame_width: 32,
+        atlas_crc: 0,
+        atlas_tiles: 0,
     };
     let mut link = TargetLink::new(info, &mut heights);
     let mut r: &[u8] = data;
