@@ -243,18 +243,26 @@ pub fn build_atlas(
     Ok((out, summary))
 }
 
-/// The map's slope (grey, 0–40°) with each tile's extent outlined in its own colour and its
-/// core in white.
+/// The map's slope (grey, 0–40°) under the atlas: each tile's core tinted in the tile's colour
+/// and labelled with its index, each tile's extent outlined in the same colour (2 px), with a
+/// title band above.
 pub fn atlas_picture(tile_bytes: &[u8], summary: &AtlasSummary) -> Result<RgbImage> {
+    use crate::pictures::render::{GLYPH, draw_text};
     let tile = Tile::parse(tile_bytes).map_err(|e| anyhow::anyhow!("source tile: {e}"))?;
     let r = tile.slope_raster().context("no slope raster")?;
     let (w, h) = (r.width(), r.height());
-    let mut img = RgbImage::new(w as u32, h as u32);
+    let band = 2 * GLYPH + 12;
+    let mut img = RgbImage::from_pixel(
+        w.max(24 * GLYPH as usize) as u32,
+        (h + band as usize) as u32,
+        Rgb([0, 0, 0]),
+    );
+    let top = band as i32;
     for y in 0..h {
         for x in 0..w {
             let v = nav_core::frame::slope_to_deg(r.get(x, y))
                 .map_or(60u8, |d| (d / 40.0 * 255.0).clamp(0.0, 255.0) as u8);
-            img.put_pixel(x as u32, y as u32, Rgb([v, v, v]));
+            img.put_pixel(x as u32, y as u32 + band, Rgb([v, v, v]));
         }
     }
     const COLOURS: [[u8; 3]; 6] = [
@@ -265,24 +273,55 @@ pub fn atlas_picture(tile_bytes: &[u8], summary: &AtlasSummary) -> Result<RgbIma
         [200, 80, 220],
         [40, 210, 210],
     ];
+    let colour = |i: usize| COLOURS[(i + i / 4) % COLOURS.len()];
     for t in &summary.tiles {
         let [cx, cy, cw, ch] = t.core;
-        draw_hollow_rect_mut(
-            &mut img,
-            Rect::at(cx as i32, cy as i32).of_size(cw.max(1) as u32, ch.max(1) as u32),
-            Rgb([255, 255, 255]),
-        );
-        let c = COLOURS[t.index % COLOURS.len()];
-        let inset = (t.index % 3) as i32;
-        draw_hollow_rect_mut(
-            &mut img,
-            Rect::at(t.col0 + inset, t.row0 + inset).of_size(
-                (t.width as i32 - 2 * inset).max(1) as u32,
-                (t.height as i32 - 2 * inset).max(1) as u32,
-            ),
-            Rgb(c),
-        );
+        let c = colour(t.index);
+        for y in cy..(cy + ch).min(h) {
+            for x in cx..(cx + cw).min(w) {
+                let p = img.get_pixel_mut(x as u32, y as u32 + band);
+                for (v, &t) in p.0.iter_mut().zip(&c) {
+                    *v = ((3 * u16::from(*v) + u16::from(t)) / 4) as u8;
+                }
+            }
+        }
     }
+    for t in &summary.tiles {
+        let c = colour(t.index);
+        for inset in 0..2 {
+            draw_hollow_rect_mut(
+                &mut img,
+                Rect::at(t.col0 + inset, t.row0 + inset + top).of_size(
+                    (t.width as i32 - 2 * inset).max(1) as u32,
+                    (t.height as i32 - 2 * inset).max(1) as u32,
+                ),
+                Rgb(c),
+            );
+        }
+        let [cx, cy, cw, ch] = t.core;
+        let label = t.index.to_string();
+        let lx = (cx + cw / 2).saturating_sub(label.len() * GLYPH as usize / 2);
+        let ly = (cy + ch / 2).saturating_sub(GLYPH as usize / 2) + band as usize;
+        draw_text(&mut img, lx as u32, ly as u32, &label, [255, 255, 255]);
+    }
+    let [nx, ny] = summary.tiles_xy;
+    draw_text(
+        &mut img,
+        4,
+        4,
+        &format!("atlas {nx}x{ny} tiles, {} m px", summary.pixel_m),
+        [255, 255, 255],
+    );
+    draw_text(
+        &mut img,
+        4,
+        GLYPH + 8,
+        &format!(
+            "core <={} px (tint), margin {} px",
+            summary.layout.core_px, summary.layout.margin_px
+        ),
+        [200, 200, 200],
+    );
     Ok(img)
 }
 
