@@ -9,7 +9,7 @@ use std::path::Path;
 use std::process::Command;
 
 use ground_sim::flyer::frames::{FramePose, SensorModel, synth_frame};
-use ground_sim::reference::atlas::{AtlasLayout, build_atlas};
+use ground_sim::reference::atlas::{AtlasLayout, build_atlas, build_atlas_within};
 use ground_sim::reference::{Smoothing, load, reference_dem, surf_config_for, write_reference};
 use ground_sim::terrain::{Preset, TerrainParams, generate};
 use indicatif::ProgressBar;
@@ -60,6 +60,17 @@ fn frames_across_tile_edges_fix_on_the_atlas_as_on_the_single_tile() {
             .iter()
             .all(|t| t.width == 180 && t.height == 180)
     );
+    // A byte budget shrinks the cores until every tile fits; an impossible one is an error.
+    let budget = summary.largest_tile_bytes * 3 / 4;
+    let (_, small) = build_atlas_within(&single_bytes, layout, 8192, budget).unwrap();
+    assert!(
+        small.largest_tile_bytes <= budget,
+        "{}",
+        small.largest_tile_bytes
+    );
+    assert!(small.tiles.len() > 4 && small.layout.core_px < 150);
+    let err = build_atlas_within(&single_bytes, layout, 8192, 1000).unwrap_err();
+    assert!(err.to_string().contains("no core size"), "{err}");
 
     let single = Navigator::new(Tile::parse(&single_bytes).unwrap(), NavConfig::default());
     let mapped = MappedAtlas::<16>::new(&bytes).unwrap();

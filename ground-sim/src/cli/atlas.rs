@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, anyhow};
-use ground_sim::reference::atlas::{AtlasLayout, atlas_picture, build_atlas};
+use ground_sim::reference::atlas::{AtlasLayout, atlas_picture, build_atlas, build_atlas_within};
 use ground_sim::reference::load;
 use ground_sim::reference::tile::MAX_TILE_FEATURES;
 
@@ -25,6 +25,10 @@ pub struct Args {
     /// Most features per tile (strongest first).
     #[arg(long, default_value_t = MAX_TILE_FEATURES)]
     pub max_features: usize,
+    /// Largest tile allowed, bytes (e.g. the flyer's RAM buffer for tiles read from external
+    /// flash): the cores shrink from `--core-px` until every tile fits.
+    #[arg(long)]
+    pub max_tile_bytes: Option<usize>,
     /// Output folder: atlas.bin, atlas.json, atlas.png.
     #[arg(long)]
     pub out: PathBuf,
@@ -37,11 +41,11 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         core_px: a.core_px,
         margin_px: a.margin_px,
     };
-    let (bytes, summary) = build_atlas(
-        &reference.tile_bytes,
-        layout,
-        a.max_features.min(MAX_TILE_FEATURES),
-    )?;
+    let max_features = a.max_features.min(MAX_TILE_FEATURES);
+    let (bytes, summary) = match a.max_tile_bytes {
+        Some(m) => build_atlas_within(&reference.tile_bytes, layout, max_features, m)?,
+        None => build_atlas(&reference.tile_bytes, layout, max_features)?,
+    };
     // What flies reads it back: every tile validated as the flyer will.
     nav_core::atlas::MappedAtlas::<{ ground_sim::flyer::onboard::GROUND_ATLAS_TILES }>::new(&bytes)
         .map_err(|e| anyhow!("the atlas just written does not read back: {e}"))?;
@@ -62,7 +66,7 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         summary.grid_px[0],
         summary.grid_px[1],
         summary.pixel_m,
-        a.core_px,
+        summary.layout.core_px,
         a.margin_px
     );
     println!(

@@ -243,6 +243,38 @@ pub fn build_atlas(
     Ok((out, summary))
 }
 
+/// [`build_atlas`] with the largest core side ≤ `layout.core_px` whose every tile fits in
+/// `max_tile_bytes` (e.g. the RAM buffer of a `nav_core::atlas::BufferedAtlas`): cores shrink
+/// by 10 % (at least 1 px) until the largest tile fits. Errors when even 1 px cores do not fit
+/// (the margins alone are too large for the budget).
+pub fn build_atlas_within(
+    tile_bytes: &[u8],
+    layout: AtlasLayout,
+    max_features: usize,
+    max_tile_bytes: usize,
+) -> Result<(Vec<u8>, AtlasSummary)> {
+    let mut core = layout.core_px.max(1);
+    loop {
+        let l = AtlasLayout {
+            core_px: core,
+            ..layout
+        };
+        // Too many tiles is the end of the search, not an error to stop at.
+        if let Ok((bytes, s)) = build_atlas(tile_bytes, l, max_features)
+            && s.largest_tile_bytes <= max_tile_bytes
+        {
+            return Ok((bytes, s));
+        }
+        if core == 1 {
+            bail!(
+                "no core size gives tiles of at most {max_tile_bytes} bytes with {} px margins: lower --margin-px or --max-features, or raise --max-tile-bytes",
+                layout.margin_px
+            );
+        }
+        core = (core - (core / 10).max(1)).max(1);
+    }
+}
+
 /// The map's slope (grey, 0–40°) under the atlas: each tile's core tinted in the tile's colour
 /// and labelled with its index, each tile's extent outlined in the same colour (2 px), with a
 /// title band above.
