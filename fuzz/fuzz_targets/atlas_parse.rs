@@ -19,7 +19,8 @@ fuzz_target!(|data: &[u8]| {
         };
         let c = a.select(&p, 200, 200);
         assert!(c.as_slice().len() <= nav_core::atlas::MAX_ATLAS_CANDIDATES);
-        if let Ok(mut b) = BufferedAtlas::<_, 65_536>::new(data, data) {
+        let mut store = [0u8; 65_536];
+        if let Ok(mut b) = BufferedAtlas::new(data, data, &mut store) {
             for i in 0..a.len().min(8) {
                 let _ = b.tile(i as u16).map(|t| t.len());
             }

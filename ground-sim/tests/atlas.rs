@@ -74,8 +74,10 @@ fn frames_across_tile_edges_fix_on_the_atlas_as_on_the_single_tile() {
 
     let single = Navigator::new(Tile::parse(&single_bytes).unwrap(), NavConfig::default());
     let mapped = MappedAtlas::<16>::new(&bytes).unwrap();
-    let mut buffered =
-        Box::new(BufferedAtlas::<_, 1_000_000>::new(&bytes[..], &bytes[..]).unwrap());
+    let mut buffered = {
+        let buf: &mut [u8] = Box::leak(vec![0u8; 1_000_000].into_boxed_slice());
+        Box::new(BufferedAtlas::new(&bytes[..], &bytes[..], buf).unwrap())
+    };
     let nav = AtlasNavigator::new(AtlasConfig::default());
     let ah = *mapped.atlas().header();
     let mut ws = Box::new(nav_core::flight::Workspace::new());

@@ -182,6 +182,29 @@ impl AtlasEntry {
         let dy = libm::fmin(y - y0, y1 - y);
         libm::fmin(dx, dy)
     }
+    /// [`Self::depth_px`] counting only the tile's edges inside a `grid_w × grid_h` grid: an
+    /// edge on the grid's own border has no neighbour beyond it, so a frame near it is no
+    /// reason to try another tile. Infinite for a tile that spans the whole grid.
+    pub fn inner_depth_px(&self, x: f64, y: f64, grid_w: u32, grid_h: u32) -> f64 {
+        let (x0, y0) = (self.col0 as f64 - 0.5, self.row0 as f64 - 0.5);
+        let (x1, y1) = (x0 + self.width as f64, y0 + self.height as f64);
+        let end_c = self.col0 as i64 + self.width as i64;
+        let end_r = self.row0 as i64 + self.height as i64;
+        let mut d = f64::INFINITY;
+        if self.col0 > 0 {
+            d = libm::fmin(d, x - x0);
+        }
+        if end_c < grid_w as i64 {
+            d = libm::fmin(d, x1 - x);
+        }
+        if self.row0 > 0 {
+            d = libm::fmin(d, y - y0);
+        }
+        if end_r < grid_h as i64 {
+            d = libm::fmin(d, y1 - y);
+        }
+        d
+    }
     /// The prior moved from atlas pixels into this tile's pixels.
     pub fn tile_prior(&self, p: &Prior) -> Prior {
         Prior {
@@ -310,12 +333,15 @@ impl core::error::Error for AtlasError {}
 
 /// Bytes of an index with header length `header_len` and `n` tiles: preamble, header padded to
 /// 4, entries, CRC. Tile blobs may follow from this offset on.
+/// Saturates at `usize::MAX` for sizes no atlas can have.
 pub const fn atlas_index_len(header_len: usize, n: usize) -> usize {
-    align4(ATLAS_PREAMBLE_LEN + header_len) + n * ATLAS_ENTRY_LEN + 4
+    align4(ATLAS_PREAMBLE_LEN.saturating_add(header_len))
+        .saturating_add(n.saturating_mul(ATLAS_ENTRY_LEN))
+        .saturating_add(4)
 }
 
 const fn align4(n: usize) -> usize {
-    (n + 3) & !3
+    n.saturating_add(3) & !3
 }
 
 fn rd_u16(b: &[u8], at: usize) -> Option<u16> {
@@ -340,7 +366,7 @@ pub struct Atlas<'a> {
 pub struct Candidates {
     /// Tile indexes, deepest first; the first `count` are valid.
     pub tiles: [u16; MAX_ATLAS_CANDIDATES],
-    /// Their depths (prior centre to the nearest tile edge), atlas px.
+    /// Their depths ([`AtlasEntry::inner_depth_px`] of the prior's centre), atlas px.
     pub depth_px: [f32; MAX_ATLAS_CANDIDATES],
     /// Valid entries.
     pub count: u8,
@@ -458,7 +484,7 @@ impl<'a> Atlas<'a> {
     /// Entry `i`, `None` beyond the count.
     pub fn entry(&self, i: usize) -> Option<AtlasEntry> {
         let at = i.checked_mul(ATLAS_ENTRY_LEN)?;
-        let b = self.entries.get(at..at + ATLAS_ENTRY_LEN)?;
+        let b = self.entries.get(at..at.checked_add(ATLAS_ENTRY_LEN)?)?;
         Some(AtlasEntry {
             col0: rd_u32(b, 0)? as i32,
             row0: rd_u32(b, 4)? as i32,
@@ -471,18 +497,22 @@ impl<'a> Atlas<'a> {
     }
 
     /// Rank the tiles for a `frame_w × frame_h` frame under `prior` (atlas pixels; `scale` is
-    /// atlas px per frame px): by depth of the prior centre inside each tile, deepest first,
-    /// ties to the lower index. When the deepest tile holds the frame's whole reach only it is
-    /// returned; otherwise every tile reaching into the reach follows, up to
-    /// [`MAX_ATLAS_CANDIDATES`]. Empty when no tile reaches the prior's footprint at all (or the
-    /// prior is not finite). One pass over the index: `O(len)`.
+    /// atlas px per frame px). The frame's reach is half its diagonal at the largest scale
+    /// within 3σ plus 3σ of position; a tile is a candidate when the prior's centre is less than
+    /// the reach outside it (a square test). Candidates rank by [`AtlasEntry::inner_depth_px`]
+    /// (edges on the grid's border do not count: nothing lies beyond them), deepest first,
+    /// exact ties to the lower index. When the deepest tile holds the whole reach it is the
+    /// only candidate; otherwise the frame straddles and up to [`MAX_ATLAS_CANDIDATES`] follow.
+    /// Empty when no tile is in reach or the prior is not finite. One pass over the index.
     pub fn select(&self, prior: &Prior, frame_w: usize, frame_h: usize) -> Candidates {
         let (cx, cy) = (
             prior.center_tile_px[0] as f64,
             prior.center_tile_px[1] as f64,
         );
-        let half_diag = 0.5 * libm::hypot(frame_w as f64, frame_h as f64) * prior.scale as f64;
-        let reach = half_diag + 3.0 * prior.sigma_px as f64;
+        // The navigator's own footprint: the largest scale within 3σ, |σ| of position.
+        let scale = prior.scale as f64 + 3.0 * libm::fabs(prior.scale_sigma as f64);
+        let half_diag = 0.5 * libm::hypot(frame_w as f64, frame_h as f64) * scale;
+        let reach = half_diag + 3.0 * libm::fabs(prior.sigma_px as f64);
         let mut out = Candidates {
             tiles: [0; MAX_ATLAS_CANDIDATES],
             depth_px: [f32::NEG_INFINITY; MAX_ATLAS_CANDIDATES],
@@ -491,32 +521,33 @@ impl<'a> Atlas<'a> {
             half_diag_px: half_diag as f32,
             straddles: false,
         };
-        if !(cx.is_finite() && cy.is_finite() && reach.is_finite() && reach >= 0.0) {
+        if !(cx.is_finite() && cy.is_finite() && reach.is_finite()) {
             return out;
         }
+        let (gw, gh) = (self.header.width_px, self.header.height_px);
+        // Ranked in f64 (ties keep index order exactly); reported as f32.
+        let mut depth = [f64::NEG_INFINITY; MAX_ATLAS_CANDIDATES];
+        let mut n = 0usize;
         for i in 0..self.count {
             let Some(e) = self.entry(i) else { break };
-            let d = e.depth_px(cx, cy);
-            if d <= -reach {
+            if e.depth_px(cx, cy) <= -reach {
                 continue;
             }
-            // Insert into the ranked list (stable: equal depths keep index order).
-            let n = out.count as usize;
+            let d = e.inner_depth_px(cx, cy, gw, gh);
             let mut at = n;
-            while at > 0 && out.depth_px.get(at - 1).is_some_and(|&p| (p as f64) < d) {
+            while at > 0 && depth.get(at - 1).is_some_and(|&p| p < d) {
                 at -= 1;
             }
             if at >= MAX_ATLAS_CANDIDATES {
                 continue;
             }
-            let last = n.min(MAX_ATLAS_CANDIDATES - 1);
-            let mut j = last;
+            let mut j = n.min(MAX_ATLAS_CANDIDATES - 1);
             while j > at {
-                if let (Some(&t), Some(&dp)) = (out.tiles.get(j - 1), out.depth_px.get(j - 1)) {
+                if let (Some(&t), Some(&dp)) = (out.tiles.get(j - 1), depth.get(j - 1)) {
                     if let Some(s) = out.tiles.get_mut(j) {
                         *s = t;
                     }
-                    if let Some(s) = out.depth_px.get_mut(j) {
+                    if let Some(s) = depth.get_mut(j) {
                         *s = dp;
                     }
                 }
@@ -525,15 +556,19 @@ impl<'a> Atlas<'a> {
             if let Some(s) = out.tiles.get_mut(at) {
                 *s = i as u16;
             }
-            if let Some(s) = out.depth_px.get_mut(at) {
-                *s = d as f32;
+            if let Some(s) = depth.get_mut(at) {
+                *s = d;
             }
-            out.count = (n + 1).min(MAX_ATLAS_CANDIDATES) as u8;
+            n = (n + 1).min(MAX_ATLAS_CANDIDATES);
         }
-        if out.count > 0 && (out.depth_px[0] as f64) >= reach {
-            out.count = 1;
-        } else if out.count > 0 {
+        if n > 0 && depth[0] >= reach {
+            n = 1;
+        } else if n > 0 {
             out.straddles = true;
+        }
+        out.count = n as u8;
+        for (o, &d) in out.depth_px.iter_mut().zip(&depth).take(n) {
+            *o = d as f32;
         }
         out
     }
@@ -634,7 +669,10 @@ pub trait AtlasRead {
 impl AtlasRead for &[u8] {
     fn read_at(&mut self, offset: u32, buf: &mut [u8]) -> bool {
         let o = offset as usize;
-        match self.get(o..o + buf.len()) {
+        let Some(end) = o.checked_add(buf.len()) else {
+            return false;
+        };
+        match self.get(o..end) {
             Some(src) => {
                 buf.copy_from_slice(src);
                 true
@@ -644,29 +682,26 @@ impl AtlasRead for &[u8] {
     }
 }
 
-/// 4-byte aligned bytes (tile records are 4-byte aligned inside a blob).
-#[derive(Debug, Clone)]
-#[repr(C, align(4))]
-struct AlignedBuf<const B: usize>([u8; B]);
-
 /// An atlas whose tiles stay in external storage: the index borrowed from RAM, one tile at a
-/// time read through `R` into a `B`-byte RAM buffer and validated (CRC included) when the
-/// navigator switches to it; the frame that switches pays for the read and the checksum.
-#[derive(Debug, Clone)]
-pub struct BufferedAtlas<'a, R, const B: usize> {
+/// time read through `R` into a caller-given RAM buffer (e.g. a `static` of the size the
+/// ground reports as `largest_tile_bytes`) and validated (CRC included) when the navigator
+/// switches to it; the frame that switches pays for the read and the checksum.
+#[derive(Debug)]
+pub struct BufferedAtlas<'a, 'b, R> {
     atlas: Atlas<'a>,
     reader: R,
-    buf: AlignedBuf<B>,
+    buf: &'b mut [u8],
     loaded: Option<u16>,
 }
 
-impl<'a, R: AtlasRead, const B: usize> BufferedAtlas<'a, R, B> {
-    /// `index` holds (at least) the atlas index; `reader` reads the whole atlas.
-    pub fn new(index: &'a [u8], reader: R) -> Result<Self, AtlasError> {
+impl<'a, 'b, R: AtlasRead> BufferedAtlas<'a, 'b, R> {
+    /// `index` holds (at least) the atlas index; `reader` reads the whole atlas; `buf` holds
+    /// one tile (its length bounds the tiles this source can give).
+    pub fn new(index: &'a [u8], reader: R, buf: &'b mut [u8]) -> Result<Self, AtlasError> {
         Ok(Self {
             atlas: Atlas::parse(index)?,
             reader,
-            buf: AlignedBuf([0; B]),
+            buf,
             loaded: None,
         })
     }
@@ -676,7 +711,7 @@ impl<'a, R: AtlasRead, const B: usize> BufferedAtlas<'a, R, B> {
     }
 }
 
-impl<R: AtlasRead, const B: usize> TileSource for BufferedAtlas<'_, R, B> {
+impl<R: AtlasRead> TileSource for BufferedAtlas<'_, '_, R> {
     fn atlas(&self) -> &Atlas<'_> {
         &self.atlas
     }
@@ -686,7 +721,7 @@ impl<R: AtlasRead, const B: usize> TileSource for BufferedAtlas<'_, R, B> {
             .entry(index as usize)
             .ok_or(AtlasError::NoSuchTile { index })?;
         let len = e.length as usize;
-        if len > B {
+        if len > self.buf.len() {
             return Err(AtlasError::TooLarge {
                 index,
                 needed: e.length,
@@ -694,19 +729,15 @@ impl<R: AtlasRead, const B: usize> TileSource for BufferedAtlas<'_, R, B> {
         }
         if self.loaded != Some(index) {
             self.loaded = None;
-            let dst = self
-                .buf
-                .0
-                .get_mut(..len)
-                .ok_or(AtlasError::Read { index })?;
+            let dst = self.buf.get_mut(..len).ok_or(AtlasError::Read { index })?;
             if !self.reader.read_at(e.offset, dst) {
                 return Err(AtlasError::Read { index });
             }
             // Validate once per load; keep it only if it is sound.
-            check_tile(&self.atlas, index, &e, self.buf.0.get(..len).unwrap_or(&[]))?;
+            check_tile(&self.atlas, index, &e, self.buf.get(..len).unwrap_or(&[]))?;
             self.loaded = Some(index);
         }
-        check_loaded(self.buf.0.get(..len).unwrap_or(&[]), index)
+        check_loaded(self.buf.get(..len).unwrap_or(&[]), index)
     }
 }
 
@@ -775,8 +806,10 @@ impl Default for AtlasConfig {
 pub struct AtlasReport {
     /// The tiles ranked for the frame.
     pub candidates: Candidates,
-    /// Tiles located on, in order (a prefix of the candidates).
+    /// Tiles located on, in order (a prefix of the candidates, less unreadable ones).
     pub tried: u8,
+    /// Neighbours skipped because their tile could not be read (a storage fault).
+    pub unreadable: u8,
     /// The tile whose report is given: the first that fixed, else the first tried. `None`
     /// when no tile reaches the prior (then `report` is `None` too).
     pub tile: Option<u16>,
@@ -833,6 +866,8 @@ impl AtlasNavigator {
     /// consensus's refinement, or the area search, never both neighbours and the search), as on
     /// a single tile; the extra is the cheap failures' matching and consensus (docs/bounds.md).
     /// A frame that needs one tile only gives bit for bit what [`Navigator::locate_dem`] gives.
+    /// Afterwards the workspace's matches and inlier flags are those of the last tile tried
+    /// (which may not be the tile of the returned report).
     pub fn locate_dem<
         S: TileSource,
         const P: usize,
@@ -850,6 +885,7 @@ impl AtlasNavigator {
         let mut out = AtlasReport {
             candidates,
             tried: 0,
+            unreadable: 0,
             tile: None,
             tile_offset_px: [0, 0],
             report: None,
@@ -887,17 +923,26 @@ impl AtlasNavigator {
         out.tile_offset_px = [e.col0, e.row0];
         if neighbours {
             for &index in candidates.as_slice().iter().take(budget).skip(1) {
-                let e = source
-                    .atlas()
-                    .entry(index as usize)
-                    .ok_or(AtlasError::NoSuchTile { index })?;
-                let nav = Navigator::new(source.tile(index)?, self.cfg.nav);
+                let Some(e) = source.atlas().entry(index as usize) else {
+                    continue;
+                };
+                // A neighbour that cannot be read costs this frame that neighbour, not the
+                // deepest tile's report.
+                let Ok(tile) = source.tile(index) else {
+                    out.unreadable += 1;
+                    continue;
+                };
+                let nav = Navigator::new(tile, self.cfg.nav);
                 let r = nav.locate_extracted_dem(ws, w, h, k, Some(&e.tile_prior(prior)), false)?;
                 out.tried += 1;
                 if r.outcome.is_ok() {
                     out.tile = Some(index);
                     out.tile_offset_px = [e.col0, e.row0];
                     report = r;
+                    break;
+                }
+                // One expensive stage per frame: after a refinement, no further neighbour.
+                if r.refine.is_some() {
                     break;
                 }
             }
@@ -932,8 +977,9 @@ fn extract_dem<const P: usize, const W: usize, const K: usize, const M: usize>(
 }
 
 /// Serialise an atlas index for `entries` into `out` (the ground appends the tile blobs at
-/// the entries' offsets); returns the bytes written. Needs
-/// `atlas_index_len(MAX_ATLAS_HEADER_LEN, entries.len())` bytes at most.
+/// the entries' offsets); returns the bytes written (`atlas_index_len(H, entries.len())` for
+/// the encoded header's length `H`; `atlas_index_len(MAX_ATLAS_HEADER_LEN, n)` always
+/// suffices). Entries are not checked here: [`Atlas::parse`] checks them.
 pub fn write_atlas_index(
     header: &AtlasHeader<'_>,
     entries: &[AtlasEntry],
@@ -945,17 +991,16 @@ pub fn write_atlas_index(
     if !header.valid() {
         return Err(AtlasError::BadGeometry);
     }
-    let too_small = AtlasError::BufferTooSmall {
-        needed: atlas_index_len(MAX_ATLAS_HEADER_LEN, entries.len()),
-    };
-    let area = out
-        .get_mut(ATLAS_PREAMBLE_LEN..ATLAS_PREAMBLE_LEN + MAX_ATLAS_HEADER_LEN)
-        .ok_or(too_small)?;
-    let header_len = postcard::to_slice(header, area)
-        .map_err(|_| AtlasError::BadHeader)?
-        .len();
+    let mut hbuf = [0u8; MAX_ATLAS_HEADER_LEN];
+    let hbytes = postcard::to_slice(header, &mut hbuf).map_err(|_| AtlasError::BadHeader)?;
+    let header_len = hbytes.len();
     let total = atlas_index_len(header_len, entries.len());
-    let out = out.get_mut(..total).ok_or(too_small)?;
+    let out = out
+        .get_mut(..total)
+        .ok_or(AtlasError::BufferTooSmall { needed: total })?;
+    out.get_mut(ATLAS_PREAMBLE_LEN..ATLAS_PREAMBLE_LEN + header_len)
+        .ok_or(AtlasError::BufferTooSmall { needed: total })?
+        .copy_from_slice(hbytes);
     fn put(out: &mut [u8], at: usize, bytes: &[u8]) {
         if let Some(dst) = out.get_mut(at..at + bytes.len()) {
             dst.copy_from_slice(bytes);

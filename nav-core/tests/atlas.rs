@@ -72,7 +72,7 @@ fn tile_at(c0: i32, r0: i32, w: u32, h: u32) -> Vec<u8> {
     buf
 }
 
-/// Two tiles side by side (150 px cores, 20 px overlap), as the ground writes them.
+/// Two tiles side by side (150 px cores, 40 px overlap), as the ground writes them.
 fn build() -> Vec<u8> {
     let places = [(0, 0, 170, 200), (130, 0, 170, 200)];
     let blobs: Vec<Vec<u8>> = places
@@ -156,7 +156,8 @@ fn round_trip_and_both_sources_give_the_same_tiles() {
     let b = build();
     let mapped = MappedAtlas::<4>::new(&b).unwrap();
     assert_eq!(mapped.atlas().len(), 2);
-    let mut buffered = BufferedAtlas::<_, 100_000>::new(&b[..], &b[..]).unwrap();
+    let mut store = vec![0u8; 100_000];
+    let mut buffered = BufferedAtlas::new(&b[..], &b[..], &mut store).unwrap();
     for i in [0u16, 1, 1, 0] {
         let t = mapped.get(i).unwrap();
         let u = buffered.tile(i).unwrap();
@@ -169,7 +170,8 @@ fn round_trip_and_both_sources_give_the_same_tiles() {
         AtlasError::NoSuchTile { index: 2 }
     );
     // A buffer smaller than a tile is a typed error, not a truncated read.
-    let mut small = BufferedAtlas::<_, 1_000>::new(&b[..], &b[..]).unwrap();
+    let mut little = [0u8; 1_000];
+    let mut small = BufferedAtlas::new(&b[..], &b[..], &mut little).unwrap();
     assert!(matches!(
         small.tile(0).unwrap_err(),
         AtlasError::TooLarge { index: 0, .. }
@@ -244,7 +246,8 @@ fn damage_gives_typed_errors() {
         MappedAtlas::<4>::new(&b).unwrap_err(),
         AtlasError::Tile { index: 1, .. }
     ));
-    let mut buf = BufferedAtlas::<_, 100_000>::new(&b[..], &b[..]).unwrap();
+    let mut store = vec![0u8; 100_000];
+    let mut buf = BufferedAtlas::new(&b[..], &b[..], &mut store).unwrap();
     assert!(buf.tile(0).is_ok());
     assert!(matches!(
         buf.tile(1).unwrap_err(),
@@ -269,6 +272,71 @@ fn a_tile_placed_elsewhere_than_its_entry_says_is_refused() {
     );
 }
 
+#[test]
+fn an_entry_out_of_range_is_refused_even_under_a_good_crc() {
+    let good = build();
+    let n = Atlas::parse(&good).unwrap().index_len();
+    let e_start = n - 4 - 2 * 28;
+    let fix_crc = |b: &mut Vec<u8>| {
+        let crc = crc32(&b[..n - 4]);
+        b[n - 4..n].copy_from_slice(&crc.to_le_bytes());
+    };
+    // Entry 1's width 170 → 171: past the 300 px grid.
+    let mut b = good.clone();
+    b[e_start + 28 + 8] = 171;
+    fix_crc(&mut b);
+    assert_eq!(
+        Atlas::parse(&b).unwrap_err(),
+        AtlasError::BadEntry { index: 1 }
+    );
+    // Entry 0's offset inside the index.
+    let mut b = good.clone();
+    b[e_start + 16..e_start + 20].copy_from_slice(&8u32.to_le_bytes());
+    fix_crc(&mut b);
+    assert_eq!(
+        Atlas::parse(&b).unwrap_err(),
+        AtlasError::BadEntry { index: 0 }
+    );
+    // Entry 0's offset unaligned.
+    let mut b = good.clone();
+    let off = u32::from_le_bytes(b[e_start + 16..e_start + 20].try_into().unwrap()) + 2;
+    b[e_start + 16..e_start + 20].copy_from_slice(&off.to_le_bytes());
+    fix_crc(&mut b);
+    assert_eq!(
+        Atlas::parse(&b).unwrap_err(),
+        AtlasError::BadEntry { index: 0 }
+    );
+}
+
+/// CRC-32/ISO-HDLC, bit by bit (independent of the crate's table).
+fn crc32(b: &[u8]) -> u32 {
+    let mut c = !0u32;
+    for &x in b {
+        c ^= u32::from(x);
+        for _ in 0..8 {
+            c = if c & 1 != 0 {
+                (c >> 1) ^ 0xEDB8_8320
+            } else {
+                c >> 1
+            };
+        }
+    }
+    !c
+}
+
+#[test]
+fn grid_border_edges_do_not_make_a_frame_straddle() {
+    let b = build();
+    let a = Atlas::parse(&b).unwrap();
+    // 5 px from the grid's top border, deep in tile 0 otherwise: one tile, no straddle.
+    let c = a.select(&prior(60.0, 5.0, 2.0), 40, 40);
+    assert_eq!(c.as_slice(), &[0]);
+    assert!(!c.straddles);
+    // A prior just outside the grid's left border is still served by tile 0.
+    let c = a.select(&prior(-3.0, 100.0, 2.0), 40, 40);
+    assert_eq!(c.as_slice(), &[0]);
+}
+
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(512))]
 
@@ -288,7 +356,8 @@ proptest! {
             let _ = a.select(&prior(at as f32, 50.0, 3.0), 40, 40);
         }
         let _ = MappedAtlas::<4>::new(&b);
-        if let Ok(mut s) = BufferedAtlas::<_, 100_000>::new(&b[..], &b[..]) {
+        let mut store = vec![0u8; 100_000];
+        if let Ok(mut s) = BufferedAtlas::new(&b[..], &b[..], &mut store) {
             let _ = s.tile(0).map(|t| t.len());
             let _ = s.tile(1).map(|t| t.len());
         }

@@ -195,7 +195,11 @@ pub fn build_atlas(
         let crc = nav_core::tile::stored_crc(b).context("tile blob")?;
         entries.push(AtlasEntry {
             offset: u32::try_from(at).context("atlas larger than 4 GiB")?,
-            length: u32::try_from(b.len()).context("tile larger than 4 GiB")?,
+            // The reader refuses a blob that ends past 4 GiB: so does the writer.
+            length: u32::try_from(b.len())
+                .ok()
+                .filter(|&l| u32::try_from(at + l as usize).is_ok())
+                .context("atlas larger than 4 GiB")?,
             crc,
             ..*d
         });
@@ -253,19 +257,26 @@ pub fn build_atlas_within(
     max_features: usize,
     max_tile_bytes: usize,
 ) -> Result<(Vec<u8>, AtlasSummary)> {
+    let tile = Tile::parse(tile_bytes).map_err(|e| anyhow::anyhow!("source tile: {e}"))?;
+    let (w, h) = (
+        tile.header().width_px as usize,
+        tile.header().height_px as usize,
+    );
     let mut core = layout.core_px.max(1);
     loop {
         let l = AtlasLayout {
             core_px: core,
             ..layout
         };
-        // Too many tiles is the end of the search, not an error to stop at.
-        if let Ok((bytes, s)) = build_atlas(tile_bytes, l, max_features)
-            && s.largest_tile_bytes <= max_tile_bytes
-        {
-            return Ok((bytes, s));
+        // Smaller cores only add tiles: past the atlas's tile limit the search is over.
+        let tiles = w.div_ceil(core) * h.div_ceil(core);
+        if tiles <= MAX_ATLAS_TILES {
+            let (bytes, s) = build_atlas(tile_bytes, l, max_features)?;
+            if s.largest_tile_bytes <= max_tile_bytes {
+                return Ok((bytes, s));
+            }
         }
-        if core == 1 {
+        if core == 1 || tiles > MAX_ATLAS_TILES {
             bail!(
                 "no core size gives tiles of at most {max_tile_bytes} bytes with {} px margins: lower --margin-px or --max-features, or raise --max-tile-bytes",
                 layout.margin_px
