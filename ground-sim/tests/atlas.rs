@@ -74,10 +74,8 @@ fn frames_across_tile_edges_fix_on_the_atlas_as_on_the_single_tile() {
 
     let single = Navigator::new(Tile::parse(&single_bytes).unwrap(), NavConfig::default());
     let mapped = MappedAtlas::<16>::new(&bytes).unwrap();
-    let mut buffered = {
-        let buf: &mut [u8] = Box::leak(vec![0u8; 1_000_000].into_boxed_slice());
-        Box::new(BufferedAtlas::new(&bytes[..], &bytes[..], buf).unwrap())
-    };
+    let mut store = vec![0u8; summary.largest_tile_bytes];
+    let mut buffered = BufferedAtlas::new(&bytes[..], &bytes[..], &mut store).unwrap();
     let nav = AtlasNavigator::new(AtlasConfig::default());
     let ah = *mapped.atlas().header();
     let mut ws = Box::new(nav_core::flight::Workspace::new());
@@ -109,7 +107,7 @@ fn frames_across_tile_edges_fix_on_the_atlas_as_on_the_single_tile() {
             .locate_dem(&mut &mapped, ws.as_mut(), &patch, &prior)
             .unwrap();
         let on_buffered = nav
-            .locate_dem(buffered.as_mut(), ws.as_mut(), &patch, &prior)
+            .locate_dem(&mut buffered, ws.as_mut(), &patch, &prior)
             .unwrap();
         assert_eq!(
             on_mapped, on_buffered,

@@ -25,7 +25,6 @@
 
 use crate::frame::DemPatch;
 use crate::navigator::{FrameReport, NavConfig, NavError, NavWorkspace, Navigator, Prior};
-use crate::surf::extract;
 use crate::tile::{MAX_PROJECTION_LEN, Tile, TileError, TileHeader};
 use core::fmt;
 use serde::{Deserialize, Serialize};
@@ -358,6 +357,7 @@ pub struct Atlas<'a> {
     entries: &'a [u8],
     count: usize,
     index_len: usize,
+    crc: u32,
 }
 
 /// Tiles ranked for one frame by [`Atlas::select`], deepest first.
@@ -442,6 +442,7 @@ impl<'a> Atlas<'a> {
             entries,
             count,
             index_len,
+            crc: stored,
         };
         for i in 0..count {
             let e = atlas
@@ -475,6 +476,11 @@ impl<'a> Atlas<'a> {
     /// Never true for a parsed atlas (it holds at least one tile).
     pub fn is_empty(&self) -> bool {
         self.count == 0
+    }
+    /// The index's CRC-32 (its last four bytes): a digest of the whole index, and through the
+    /// entries' tile CRCs of every tile.
+    pub fn index_crc(&self) -> u32 {
+        self.crc
     }
     /// Bytes of the index (the tiles' offsets start at or after it).
     pub fn index_len(&self) -> usize {
@@ -903,7 +909,7 @@ impl AtlasNavigator {
         let (k, mut report, neighbours) = {
             let nav = Navigator::new(source.tile(first)?, self.cfg.nav);
             let k = nav.bin_factor(dem.pixel_m());
-            extract_dem(&nav, ws, dem, k)?;
+            nav.extract_dem(ws, dem, k)?;
             let mut report = nav.locate_extracted_dem(ws, w, h, k, Some(&tp), false)?;
             let hangs_over = candidates.depth_px[0] < candidates.half_diag_px;
             let neighbours = report.outcome.is_err()
@@ -950,30 +956,6 @@ impl AtlasNavigator {
         out.report = Some(report);
         Ok(out)
     }
-}
-
-/// The extraction half of [`Navigator::locate_dem`]: slope (binned, smoothed) and features
-/// into `ws`.
-fn extract_dem<const P: usize, const W: usize, const K: usize, const M: usize>(
-    nav: &Navigator<'_>,
-    ws: &mut NavWorkspace<P, W, K, M>,
-    dem: &DemPatch<'_>,
-    k: usize,
-) -> Result<(), NavError> {
-    let (slope, surf, features) = ws.parts_mut();
-    let sigma_px = nav.frame_smoothing_px(dem.pixel_m() * k as f32);
-    let fill = nav.config().fill_dropouts;
-    let img = if k > 1 || sigma_px > 0.0 {
-        slope.compute_binned_smoothed::<W>(dem, k, sigma_px, fill)?
-    } else if fill {
-        slope.compute_from_filled(dem)?
-    } else {
-        slope.compute_from(dem)?
-    };
-    let cfg = nav.frame_surf_config(img.pixel_m());
-    extract(&img, &cfg, surf.scratch(), features)?;
-    features.unbin(k);
-    Ok(())
 }
 
 /// Serialise an atlas index for `entries` into `out` (the ground appends the tile blobs at

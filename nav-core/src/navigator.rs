@@ -303,13 +303,25 @@ impl<'t> Navigator<'t> {
         dem: &DemPatch<'_>,
         prior: Option<&Prior>,
     ) -> Result<FrameReport, NavError> {
+        let k = self.bin_factor(dem.pixel_m());
+        self.extract_dem(ws, dem, k)?;
+        self.locate_extracted_dem(ws, dem.width(), dem.height(), k, prior, true)
+    }
+
+    /// The first half of [`Self::locate_dem`]: the frame's slope (binned by `k`, smoothed as
+    /// the tile says) and its features (in frame pixels) into `ws`.
+    pub(crate) fn extract_dem<const P: usize, const W: usize, const K: usize, const M: usize>(
+        &self,
+        ws: &mut NavWorkspace<P, W, K, M>,
+        dem: &DemPatch<'_>,
+        k: usize,
+    ) -> Result<(), NavError> {
         let NavWorkspace {
             slope,
             surf,
             features,
             ..
         } = ws;
-        let k = self.bin_factor(dem.pixel_m());
         let sigma_px = self.frame_smoothing_px(dem.pixel_m() * k as f32);
         let img = if k > 1 || sigma_px > 0.0 {
             slope.compute_binned_smoothed::<W>(dem, k, sigma_px, self.cfg.fill_dropouts)?
@@ -321,7 +333,7 @@ impl<'t> Navigator<'t> {
         let cfg = self.frame_surf_config(img.pixel_m());
         extract(&img, &cfg, surf.scratch(), features)?;
         features.unbin(k);
-        self.locate_extracted_dem(ws, dem.width(), dem.height(), k, prior, true)
+        Ok(())
     }
 
     /// The part of [`Self::locate_dem`] after the frame's slope and features are in `ws`:

@@ -396,7 +396,8 @@ impl<'a> Tile<'a> {
             raster,
         };
         let (w, h) = (header.width_px as f32, header.height_px as f32);
-        for i in (0..count).take_while(|_| full) {
+        // Without `full` the features passed this loop when the bytes were first parsed.
+        for i in 0..if full { count } else { 0 } {
             let k = tile.keypoint(i);
             let inside = k.x_px >= -0.5 && k.y_px >= -0.5 && k.x_px <= w - 0.5 && k.y_px <= h - 0.5;
             let finite = k.response.is_finite()

@@ -12,8 +12,8 @@ use image::{Rgb, RgbImage};
 use imageproc::drawing::draw_hollow_rect_mut;
 use imageproc::rect::Rect;
 use nav_core::atlas::{
-    ATLAS_ENTRY_LEN, AtlasEntry, AtlasHeader, MAX_ATLAS_HEADER_LEN, MAX_ATLAS_TILE_SIDE,
-    MAX_ATLAS_TILES, atlas_index_len, write_atlas_index,
+    AtlasEntry, AtlasHeader, MAX_ATLAS_HEADER_LEN, MAX_ATLAS_TILE_SIDE, MAX_ATLAS_TILES,
+    atlas_index_len, write_atlas_index,
 };
 use nav_core::{SlopeImage, SlopePx, Tile};
 use rayon::prelude::*;
@@ -243,7 +243,6 @@ pub fn build_atlas(
         source_features: tile.len(),
         tiles,
     };
-    debug_assert_eq!(ATLAS_ENTRY_LEN, 28);
     Ok((out, summary))
 }
 

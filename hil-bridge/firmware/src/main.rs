@@ -106,9 +106,7 @@ fn main() -> ! {
         Ok(a) => a,
         Err(_) => fail("the linked flight atlas does not parse"),
     };
-    let atlas_crc =
-        nav_core::tile::stored_crc(ATLAS.0.get(..atlas.atlas().index_len()).unwrap_or(&[]))
-            .unwrap_or(0);
+    let atlas_crc = atlas.atlas().index_crc();
     #[cfg(not(feature = "uart-link"))]
     let (Ok(mut rx), Ok(mut tx)) = (HostFile::link_rx(), HostFile::link_tx()) else {
         fail("cannot open hil-link.rx / hil-link.tx in QEMU's working directory");

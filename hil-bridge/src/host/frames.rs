@@ -507,10 +507,22 @@ pub fn generate_set(terrain_frames: usize) -> Result<FrameSet> {
 
 /// The atlas sequence: frames along a diagonal through the point where the four tiles meet
 /// (tile pixels (85, 105) to (215, 195)), with the priors of a filter in cruise (σ 2.5 px =
-/// 50 m, drawn about 1σ off), then the gentle frames at the corner.
+/// 50 m, drawn about 1σ off), the gentle frames at the corner, a coast and two stress frames.
 fn atlas_frames(z: &[f32], frames: &mut Vec<Frame>) {
-    let n = ATLAS_FRAMES + ATLAS_GENTLE_FRAMES;
-    for k in 0..n {
+    let prior = |x: f64, y: f64, sigma_px: f32, heading: f64| crate::msg::WirePrior {
+        center_tile_px: [x as f32, y as f32],
+        sigma_px,
+        heading_rad: heading as f32 + 0.02,
+        heading_sigma_rad: 0.035,
+        scale: 0.5,
+        scale_sigma: 0.01,
+    };
+    let truth = |x: f64, y: f64, heading: f64| Truth {
+        center_tile_px: [x, y],
+        heading_rad: heading,
+        scale: FRAME_PIXEL_M as f64 / TILE_PIXEL_M,
+    };
+    for k in 0..ATLAS_FRAMES + ATLAS_GENTLE_FRAMES {
         let gentle = k >= ATLAS_FRAMES;
         let t = if gentle {
             0.5 + 0.03 * (k - ATLAS_FRAMES) as f64
@@ -526,120 +538,75 @@ fn atlas_frames(z: &[f32], frames: &mut Vec<Frame>) {
                 *h = (mean + (*h as f64 - mean) * GENTLE_RELIEF as f64) as f32;
             }
         }
-        let truth = Truth {
-            center_tile_px: [x, y],
-            heading_rad: heading,
-            scale: FRAME_PIXEL_M as f64 / TILE_PIXEL_M,
+        let (name, kind) = if gentle {
+            ("gentle-", FrameKind::AtlasGentle)
+        } else {
+            ("", FrameKind::AtlasCrossing)
         };
-        let prior = crate::msg::WirePrior {
-            center_tile_px: [x as f32 + 2.0, y as f32 - 1.5],
-            sigma_px: 2.5,
-            heading_rad: heading as f32 + 0.02,
-            heading_sigma_rad: 0.035,
-            scale: 0.5,
-            scale_sigma: 0.01,
-        };
-        push_atlas_frame(frames, k, gentle, heights, truth, prior);
+        push_atlas_frame(
+            frames,
+            format!(
+                "atlas-{name}{k:02}-{:03}deg",
+                heading.to_degrees().round() as i64
+            ),
+            kind,
+            heights,
+            Some(truth(x, y, heading)),
+            prior(x + 2.0, y - 1.5, 2.5, heading),
+        );
     }
     // The coast: truth at (240, 120), prior at (140, 121) with σ 30 px.
     let heading = 75f64.to_radians();
-    let heights = cut(z, 480.5, 240.5, heading);
-    let truth = Truth {
-        center_tile_px: [240.0, 120.0],
-        heading_rad: heading,
-        scale: FRAME_PIXEL_M as f64 / TILE_PIXEL_M,
-    };
-    let prior = crate::msg::WirePrior {
-        center_tile_px: [140.0, 121.0],
-        sigma_px: 30.0,
-        heading_rad: heading as f32 + 0.02,
-        heading_sigma_rad: 0.035,
-        scale: 0.5,
-        scale_sigma: 0.01,
-    };
-    let id = frames.len() as u32;
-    frames.push(Frame {
-        meta: FrameMeta {
-            id,
-            name: "atlas-retry-coast".into(),
-            kind: FrameKind::AtlasRetry,
-            width: FRAME_SIDE as u16,
-            height: FRAME_SIDE as u16,
-            pixel_m: FRAME_PIXEL_M,
-            truth: Some(truth),
-            prior: Some(prior),
-            job: FrameJob::AtlasLocate,
-            truth_offset_m: None,
-        },
-        heights_m: heights,
-    });
-    // The textured stress frame at the corner: every neighbour within the budget is tried.
+    push_atlas_frame(
+        frames,
+        "atlas-retry-coast".into(),
+        FrameKind::AtlasRetry,
+        cut(z, 480.5, 240.5, heading),
+        Some(truth(240.0, 120.0, heading)),
+        prior(140.0, 121.0, 30.0, heading),
+    );
+    // Stress frames at the corner: every neighbour within the budget is tried.
     for (kind, seed) in [(FrameKind::Textured, 79), (FrameKind::MaxKeypoints, 80)] {
-        let id = frames.len() as u32;
-        frames.push(Frame {
-            meta: FrameMeta {
-                id,
-                name: format!(
-                    "atlas-stress-{}",
-                    serde_json::to_string(&kind)
-                        .unwrap_or_default()
-                        .trim_matches('"')
-                ),
-                kind: FrameKind::AtlasStress,
-                width: FRAME_SIDE as u16,
-                height: FRAME_SIDE as u16,
-                pixel_m: FRAME_PIXEL_M,
-                truth: None,
-                prior: Some(crate::msg::WirePrior {
-                    center_tile_px: [150.0, 150.0],
-                    sigma_px: 8.0,
-                    heading_rad: 0.3,
-                    heading_sigma_rad: 0.1,
-                    scale: 0.5,
-                    scale_sigma: 0.03,
-                }),
-                job: FrameJob::AtlasLocate,
-                truth_offset_m: None,
+        let name = serde_json::to_string(&kind).unwrap_or_default();
+        push_atlas_frame(
+            frames,
+            format!("atlas-stress-{}", name.trim_matches('"')),
+            FrameKind::AtlasStress,
+            stress(kind, seed),
+            None,
+            crate::msg::WirePrior {
+                heading_rad: 0.3,
+                heading_sigma_rad: 0.1,
+                scale_sigma: 0.03,
+                ..prior(150.0, 150.0, 8.0, 0.0)
             },
-            heights_m: stress(kind, seed),
-        });
+        );
     }
 }
 
 fn push_atlas_frame(
     frames: &mut Vec<Frame>,
-    k: usize,
-    gentle: bool,
-    heights: Vec<f32>,
-    truth: Truth,
+    name: String,
+    kind: FrameKind,
+    heights_m: Vec<f32>,
+    truth: Option<Truth>,
     prior: crate::msg::WirePrior,
 ) {
-    let heading = truth.heading_rad;
-    {
-        frames.push(Frame {
-            meta: FrameMeta {
-                id: frames.len() as u32,
-                name: format!(
-                    "atlas-{}{k:02}-{:03}deg",
-                    if gentle { "gentle-" } else { "" },
-                    heading.to_degrees().round() as i64
-                ),
-                kind: if gentle {
-                    FrameKind::AtlasGentle
-                } else {
-                    FrameKind::AtlasCrossing
-                },
-                width: FRAME_SIDE as u16,
-                height: FRAME_SIDE as u16,
-                pixel_m: FRAME_PIXEL_M,
-                truth: Some(truth),
-                prior: Some(prior),
-                job: FrameJob::AtlasLocate,
-                truth_offset_m: None,
-            },
-            heights_m: heights,
-        });
-    }
+    frames.push(Frame {
+        meta: FrameMeta {
+            id: frames.len() as u32,
+            name,
+            kind,
+            width: FRAME_SIDE as u16,
+            height: FRAME_SIDE as u16,
+            pixel_m: FRAME_PIXEL_M,
+            truth,
+            prior: Some(prior),
+            job: FrameJob::AtlasLocate,
+            truth_offset_m: None,
+        },
+        heights_m,
+    });
 }
 
 /// Seed of the final phase's landing zone and frame noise.

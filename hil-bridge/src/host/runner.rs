@@ -492,8 +492,7 @@ pub fn run(opts: &RunOptions) -> Result<Report> {
     let nav = Navigator::new(tile, NavConfig::default());
     let atlas: Box<Atlas<'_>> =
         Box::new(Atlas::new(&set.atlas).map_err(|e| anyhow::anyhow!("atlas: {e}"))?);
-    let atlas_crc =
-        nav_core::tile::stored_crc(&set.atlas[..atlas.atlas().index_len()]).unwrap_or(0);
+    let atlas_crc = atlas.atlas().index_crc();
     let mut ws: Box<Workspace> = Box::new(Workspace::new());
     let mut fp: Box<FinalPhase> = Box::default();
 
