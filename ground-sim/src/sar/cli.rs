@@ -6,10 +6,12 @@ use anyhow::{Context, bail};
 
 use super::config::{Polarisation, RadarPreset, SarConfig};
 use super::geometry::SarDem;
-use super::pipeline::{SimOptions, simulate_with};
+use super::pipeline::{MeshOffset, SceneFrame, SimOptions, simulate_with};
 use super::products::write_products;
 use super::psf::run_point_target;
+use super::scattering::splitmix64;
 use super::scene::{AnalyticSurface, analytic_dem};
+use crate::insar::blocks::{BlockLayout, BlockSpec};
 
 /// Radar parameters: a TOML file, then individual overrides.
 #[derive(Debug, Clone, Default, clap::Args)]
@@ -139,6 +141,19 @@ pub struct SarArgs {
     /// Hide progress bars.
     #[arg(long)]
     pub no_progress: bool,
+    /// Largest core block side, DEM pixels: a scene wider or taller than this is simulated in
+    /// overlapping blocks, each alone (memory bounded by the block), seen from the whole
+    /// scene's track, with the scene's speckle; SLCs of block i go to OUT/blocks/block-iii/.
+    /// 0 = always one piece.
+    #[arg(long, default_value_t = 0)]
+    pub block_px: usize,
+    /// Margin added to each side of a block, DEM pixels.
+    #[arg(long, default_value_t = 50)]
+    pub block_overlap_px: usize,
+    /// Simulate only block I of N (0-based, e.g. a job-array task); N must be the scene's
+    /// block count (`--block-px` cuts it).
+    #[arg(long, value_name = "I/N", requires = "block_px")]
+    pub block: Option<crate::evaluation::shard::Shard>,
 }
 
 /// `ground-sim psf`: point-target analysis on a flat scene with one bright target.
@@ -194,6 +209,17 @@ pub fn run_sar(args: SarArgs) -> anyhow::Result<()> {
         cfg.mesh_spacing_m,
         cfg.polarisations.len()
     );
+    if args.block_px > 0 && (dem.width > args.block_px || dem.height > args.block_px) {
+        return run_sar_blocks(&args, &cfg, &dem);
+    }
+    if args.block.is_some() {
+        bail!(
+            "--block: the scene ({}×{} px) fits one block of --block-px {}; run without --block",
+            dem.width,
+            dem.height,
+            args.block_px
+        );
+    }
     let opts = SimOptions {
         progress: !args.no_progress,
         ..SimOptions::default()
@@ -209,6 +235,127 @@ pub fn run_sar(args: SarArgs) -> anyhow::Result<()> {
         t.total_s,
         report.display()
     );
+    Ok(())
+}
+
+/// What `sar` writes beside a block's SLCs (`block.json`): where the block lies in the scene.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct SarBlockRecord {
+    /// The layout, in DEM pixels.
+    pub layout: BlockLayout,
+    /// This block: core and extent, DEM pixels (rows = azimuth, columns = ground range).
+    pub block: BlockSpec,
+    /// The extent's first node in the scene's SAR frame (azimuth, ground range), m; the SLCs'
+    /// `first_azimuth_m` / `first_range_m` are in the same frame as the whole scene's.
+    pub origin_m: [f64; 2],
+    /// The whole scene's centre the track is placed for (azimuth, ground range, height), m.
+    pub scene_centre_m: [f64; 3],
+    /// Seed of this block's thermal noise (the speckle is the scene's).
+    pub noise_seed: u64,
+    /// Facets simulated.
+    pub facets: usize,
+    /// Echo simulation time, s.
+    pub echoes_s: f64,
+    /// Whole block time (scene, echoes, focusing), s.
+    pub total_s: f64,
+}
+
+/// `sar` over a scene larger than `--block-px`: every block (or the one `--block` names)
+/// simulated alone from the whole scene's track and written to `OUT/blocks/block-iii/`.
+fn run_sar_blocks(args: &SarArgs, cfg: &SarConfig, dem: &SarDem) -> anyhow::Result<()> {
+    let layout = BlockLayout::new(dem.width, dem.height, args.block_px, args.block_overlap_px)?;
+    let indices: Vec<usize> = match args.block {
+        Some(b) => {
+            if b.count != layout.count() {
+                bail!(
+                    "--block {}/{}: the scene cuts into {} blocks at --block-px {} (overlap {})",
+                    b.index,
+                    b.count,
+                    layout.count(),
+                    args.block_px,
+                    args.block_overlap_px
+                );
+            }
+            vec![b.index]
+        }
+        None => (0..layout.count()).collect(),
+    };
+    let p = dem.pixel_m;
+    let centre = [
+        0.5 * (dem.height - 1) as f64 * p,
+        0.5 * (dem.width - 1) as f64 * p,
+        dem.mean_height_m(),
+    ];
+    eprintln!(
+        "SAR in blocks: {} × {} blocks of <= {} px (+{} each side); running {}",
+        layout.rows,
+        layout.cols,
+        args.block_px,
+        args.block_overlap_px,
+        if indices.len() == 1 {
+            format!("block {}", indices[0])
+        } else {
+            "all".into()
+        }
+    );
+    for i in indices {
+        let spec = layout.block(i)?;
+        let e = spec.extent;
+        let (r0, c0, w, h) = (e.row0, e.col0, e.width(), e.height());
+        let mut heights = Vec::with_capacity(w * h);
+        for r in r0..r0 + h {
+            heights.extend_from_slice(&dem.heights_m[r * dem.width + c0..r * dem.width + c0 + w]);
+        }
+        let origin = [r0 as f64 * p, c0 as f64 * p];
+        let block_dem = SarDem::new_checked(w, h, p, heights, origin)?;
+        // Speckle by place in the scene's mesh when the mesh divides the DEM pixel, so
+        // overlapping blocks see the same ground alike (as `insar` blocks do).
+        let s = p / cfg.mesh_spacing_m;
+        let mesh_offset = ((s - s.round()).abs() < 1e-9 && s >= 1.0).then(|| {
+            let s = s.round() as usize;
+            MeshOffset {
+                row: r0 * s,
+                col: c0 * s,
+                cells_wide: (dem.width - 1) * s,
+            }
+        });
+        let noise_seed = splitmix64(cfg.seed ^ splitmix64(i as u64 + 1));
+        let opts = SimOptions {
+            progress: !args.no_progress,
+            scene: Some(SceneFrame {
+                centre_m: centre,
+                mesh_offset,
+                noise_seed,
+            }),
+            ..SimOptions::default()
+        };
+        let pair = simulate_with(&block_dem, cfg, &opts)
+            .with_context(|| format!("simulating block {i}"))?;
+        let dir = args.out.join("blocks").join(format!("block-{i:03}"));
+        write_products(&pair, [w, h], p, &dir)?;
+        let record = SarBlockRecord {
+            layout,
+            block: spec,
+            origin_m: origin,
+            scene_centre_m: centre,
+            noise_seed,
+            facets: pair.stats.facets,
+            echoes_s: pair.timings.echoes_s,
+            total_s: pair.timings.total_s,
+        };
+        std::fs::write(
+            dir.join("block.json"),
+            serde_json::to_string_pretty(&record)? + "\n",
+        )
+        .with_context(|| format!("writing {}", dir.join("block.json").display()))?;
+        eprintln!(
+            "block {i}: {w}×{h} px from ({r0}, {c0}), {} facets, echoes {:.1} s, total {:.1} s -> {}",
+            pair.stats.facets,
+            pair.timings.echoes_s,
+            pair.timings.total_s,
+            dir.display()
+        );
+    }
     Ok(())
 }
 
