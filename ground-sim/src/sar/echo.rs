@@ -26,7 +26,7 @@ use rustfft::{Fft, FftPlanner};
 
 use super::config::{Derived, Polarisation, SarConfig};
 use super::geometry::{Antenna, EchoWindow, PulseGrid, fft_friendly_len};
-use super::kernel::{DEPOSIT_TAPS, DepositKernel, KERNEL_TAPS, cos_sin_turns};
+use super::kernel::{DEPOSIT_TAPS, DepositKernel, KERNEL_TAPS, cos_sin_turns_f32};
 use super::scattering::complex_gaussian;
 use super::scene::Scatterers;
 use super::{C32, C64, MAX_POLARISATIONS, SarError, SarResult};
@@ -303,8 +303,8 @@ impl EchoSimulator {
                 let u = ((r - r0) * inv_dr).max(-1e9).min(1e9);
                 (first[k], row[k], frac[k]) = DepositKernel::position(u);
                 // exp(−i4πR/λ) = exp(−i2π·(2R/λ)).
-                let (c, s) = cos_sin_turns(r * two_over_lambda);
-                let carrier = C32::new(c as f32, -s as f32);
+                let (c, s) = cos_sin_turns_f32(r * two_over_lambda);
+                let carrier = C32::new(c, -s);
                 amp[k] = std::array::from_fn(|p| amps[k][p] * carrier);
             }
             for k in 0..m {
