@@ -10,8 +10,9 @@
 //! * [`EchoSimulator::simulate_fast`] deposits `S_m·exp(−i4πR_m/λ)` for each scatterer with the
 //!   windowed-sinc kernel at its exact fractional delay (a band-limited delta, accurate over the
 //!   chirp band `|f| ≤ fs/4`), then convolves every pulse with the sampled chirp by one
-//!   FFT–multiply–IFFT: `O(pulses × (scatterers × 10 + N log N))` (10 = [`DEPOSIT_TAPS`]). Both agree inside the chirp
-//!   band, the only part the range matched filter keeps.
+//!   FFT–multiply–IFFT: `O(pulses × (scatterers × DEPOSIT_TAPS + N log N))`
+//!   ([`DEPOSIT_TAPS`] = 8). Both agree inside the chirp band, the only part the range matched
+//!   filter keeps.
 //!
 //! Stop-and-hop: the platform does not move during a pulse's flight. The azimuth envelope uses
 //! each scatterer's own footprint `L_s = λR/L_A` so every scatterer spans the same Doppler band
@@ -224,7 +225,7 @@ impl EchoSimulator {
                     if missed > 0 {
                         outside.fetch_add(missed, Ordering::Relaxed);
                     }
-                    // Lanes summed in a fixed order: the result depends on the facet set only.
+                    // Lanes summed in a fixed order: deterministic for a given facet order.
                     let (first_lane, others) = buf.split_at_mut(npol * nfft);
                     for other in others.chunks_exact(npol * nfft) {
                         for (d, &v) in first_lane.iter_mut().zip(other) {
@@ -295,7 +296,8 @@ impl EchoSimulator {
             // Geometry of the chunk: no branch, no libm, no saturating conversion.
             for k in 0..m {
                 let dx = xs[k] - xp;
-                inside[k] = dx.abs() <= halves[k];
+                // Negated so that a NaN reaches the counted window check below.
+                inside[k] = !(dx.abs() > halves[k]);
                 let r = (rs[k] + dx * dx).sqrt();
                 // Bounded so the table position is defined; a NaN becomes far outside the
                 // window (max/min, unlike clamp, map NaN to a bound) and is counted below.
@@ -325,10 +327,8 @@ impl EchoSimulator {
                     let aa: [f32; 2 * DEPOSIT_TAPS] =
                         std::array::from_fn(|k| if k % 2 == 0 { a.re } else { a.im });
                     let at = 2 * (lane + p * nfft + base);
-                    let Some(dst) = flat.get_mut(at..at + 2 * DEPOSIT_TAPS) else {
-                        missed += 1;
-                        continue;
-                    };
+                    // In range: base + DEPOSIT_TAPS ≤ ns ≤ nfft was checked above.
+                    let dst = &mut flat[at..at + 2 * DEPOSIT_TAPS];
                     for ((d, &wk), &ak) in dst.iter_mut().zip(w.iter()).zip(aa.iter()) {
                         *d += ak * wk;
                     }
