@@ -113,9 +113,9 @@ impl DepositKernel {
     }
 
     /// Where a value at fractional sample position `u` (|u| < 2⁴¹) sits in the table:
-    /// `(first tap, phase row, fraction between rows)` — the same numbers
-    /// [`Self::paired_weights`] derives, with no branch or saturating conversion so that a loop
-    /// over many `u` vectorises. `u·KERNEL_PHASES` is exact (a power of two), so the row and
+    /// `(first tap, phase row, fraction between rows)`, with no branch or saturating
+    /// conversion so that a loop over many `u` vectorises (then
+    /// `value(u) ≈ Σ_j w[2j]·x[first + j]` with `w` from [`Self::weights_at`]). `u·KERNEL_PHASES` is exact (a power of two), so the row and
     /// fraction equal those of `(u − ⌊u⌋)·KERNEL_PHASES`.
     #[inline(always)]
     pub fn position(u: f64) -> (i64, usize, f32) {
@@ -136,28 +136,6 @@ impl DepositKernel {
             w[k] = r0[k] + frac * (r1[k] - r0[k]);
         }
         w
-    }
-
-    /// Paired weights for a value at fractional sample position `u`:
-    /// `value(u) ≈ Σ_j w[2j]·x[first + j]` (`w[2j + 1] = w[2j]`). Returns `first` (may be
-    /// negative or past the end: callers check bounds).
-    #[inline(always)]
-    pub fn paired_weights(&self, u: f64) -> (i64, [f32; 2 * DEPOSIT_TAPS]) {
-        // Truncation is floor for u ≥ 0 (the hot path) and avoids a libm call on baseline x86.
-        let k0 = if u >= 0.0 {
-            (u as i64) as f64
-        } else {
-            u.floor()
-        };
-        let pf = (u - k0) * KERNEL_PHASES as f64;
-        let p = (pf as usize).min(KERNEL_PHASES - 1);
-        let a = (pf - p as f64) as f32;
-        let (r0, r1) = (&self.paired[p], &self.paired[p + 1]);
-        let mut w = [0.0_f32; 2 * DEPOSIT_TAPS];
-        for k in 0..2 * DEPOSIT_TAPS {
-            w[k] = r0[k] + a * (r1[k] - r0[k]);
-        }
-        (k0 as i64 - DEPOSIT_LEAD, w)
     }
 }
 
@@ -217,41 +195,10 @@ pub fn floor_fast(x: f64) -> (f64, i64) {
     (f, i)
 }
 
-/// `(cos 2πt, sin 2πt)` for a phase `t` in turns, `|t| < 2⁴⁹`. Quadrant reduction in f64 (exact)
-/// and Taylor polynomials on `[−π/4, π/4]` (error < 2·10⁻⁹); ≈ 10× cheaper than libm's `sincos`
-/// in the echo deposit loop. Tested against `f64::sin_cos`.
-#[inline(always)]
-pub fn cos_sin_turns(t: f64) -> (f64, f64) {
-    let x4 = 4.0 * t;
-    let shifted = x4 + MAGIC;
-    let q = shifted - MAGIC;
-    let r = (x4 - q) * std::f64::consts::FRAC_PI_2;
-    let r2 = r * r;
-    let s =
-        r * (1.0 + r2 * (-1.0 / 6.0 + r2 * (1.0 / 120.0 + r2 * (-1.0 / 5040.0 + r2 / 362_880.0))));
-    let c = 1.0
-        + r2 * (-0.5
-            + r2 * (1.0 / 24.0 + r2 * (-1.0 / 720.0 + r2 * (1.0 / 40_320.0 - r2 / 3_628_800.0))));
-    // Quadrant q mod 4 from the mantissa bits: 0 → (c, s), 1 → (−s, c), 2 → (−c, −s),
-    // 3 → (s, −c). Selected and negated with bit operations: the quadrant is random from one
-    // facet to the next, and a branch on it mispredicts three times in four.
-    let qb = shifted.to_bits();
-    let swap = (qb & 1).wrapping_neg();
-    let (cb, sb) = (c.to_bits(), s.to_bits());
-    let cos_b = (cb & !swap) | (sb & swap);
-    let sin_b = (sb & !swap) | (cb & swap);
-    let neg_cos = (qb.wrapping_add(1) & 2) << 62;
-    let neg_sin = (qb & 2) << 62;
-    (
-        f64::from_bits(cos_b ^ neg_cos),
-        f64::from_bits(sin_b ^ neg_sin),
-    )
-}
-
 /// `(cos 2πt, sin 2πt)` in f32 for a phase `t` in turns, `|t| < 2⁴⁹`: the quadrant reduction
-/// in f64 (exact, as in [`cos_sin_turns`]) and the polynomials in f32 on `[−π/4, π/4]`, which
-/// is all the precision an f32 carrier keeps (error < 4·10⁻⁷, test below) at twice the vector
-/// width. The echo deposit's carrier.
+/// in f64 (exact at lunar ranges, where `t ≈ 10⁶` turns) and Taylor polynomials in f32 on
+/// `[−π/4, π/4]`, which is all the precision an f32 carrier keeps (error < 4·10⁻⁷, tested
+/// against libm). No libm call and no branch: the echo deposit's carrier, in a vectorised loop.
 #[inline(always)]
 pub fn cos_sin_turns_f32(t: f64) -> (f32, f32) {
     let x4 = 4.0 * t;
@@ -261,7 +208,9 @@ pub fn cos_sin_turns_f32(t: f64) -> (f32, f32) {
     let r2 = r * r;
     let s = r * (1.0 + r2 * (-1.0 / 6.0 + r2 * (1.0 / 120.0 + r2 * (-1.0 / 5040.0))));
     let c = 1.0 + r2 * (-0.5 + r2 * (1.0 / 24.0 + r2 * (-1.0 / 720.0 + r2 * (1.0 / 40_320.0))));
-    // Quadrant select and signs as in `cos_sin_turns`, on f32 bits.
+    // Quadrant q mod 4 from the mantissa bits: 0 → (c, s), 1 → (−s, c), 2 → (−c, −s),
+    // 3 → (s, −c). Selected and negated with bit operations: the quadrant is random from one
+    // facet to the next, and a branch on it mispredicts three times in four.
     let qb = shifted.to_bits() as u32;
     let swap = (qb & 1).wrapping_neg();
     let (cb, sb) = (c.to_bits(), s.to_bits());
@@ -278,20 +227,6 @@ pub fn cos_sin_turns_f32(t: f64) -> (f32, f32) {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn fast_cos_sin_matches_libm() {
-        let mut worst = 0.0f64;
-        for i in 0..200_000u64 {
-            // Phases like 2R/λ at lunar ranges plus small and negative ones.
-            let t = (i as f64) * 4.656_612_873e-1 + if i % 2 == 0 { 9.3e5 } else { -3.1 };
-            let (c, s) = cos_sin_turns(t);
-            let frac = t - t.floor();
-            let (s0, c0) = (2.0 * std::f64::consts::PI * frac).sin_cos();
-            worst = worst.max((c - c0).abs()).max((s - s0).abs());
-        }
-        assert!(worst < 1e-8, "{worst}");
-    }
 
     /// Worst error over fractional delays of a complex tone at `f` cycles/sample rebuilt
     /// from its samples with `weights` (first tap, weight of tap j).
@@ -324,24 +259,36 @@ mod tests {
         for i in 0..=10 {
             let f = 0.025 * i as f64; // 0 … fs/4
             let e = tone_error(f, |u| {
-                let (first, w) = k.paired_weights(u);
+                let (first, row, frac) = DepositKernel::position(u);
+                let w = k.weights_at(row, frac);
                 (first, w.iter().step_by(2).copied().collect())
             });
             let db = 20.0 * e.log10();
             assert!(db < -52.0, "tone at {f} cycles/sample: {db:.1} dB");
         }
         // Paired: both lanes of a sample carry the same weight.
-        let (_, w) = k.paired_weights(12.345);
+        let (_, row, frac) = DepositKernel::position(12.345);
+        let w = k.weights_at(row, frac);
         assert!(w.chunks_exact(2).all(|p| p[0].to_bits() == p[1].to_bits()));
-        // The vectorisable table position gives the very same weights.
+        // The branch-free table position is the plain one: ⌊u⌋, row and fraction of the
+        // fractional part, and the same interpolated weights, bit for bit.
         for i in 0..4000 {
             let u = -3.0 + i as f64 * 0.618_033_988_7 + 1e-9 * (i % 7) as f64;
-            let (first, w) = k.paired_weights(u);
-            let (f2, row, frac) = DepositKernel::position(u);
-            let w2 = k.weights_at(row, frac);
-            assert_eq!(first, f2, "u = {u}");
+            let k0 = u.floor();
+            let pf = (u - k0) * KERNEL_PHASES as f64;
+            let p = pf.floor() as usize;
+            let a = (pf - p as f64) as f32;
+            let (first, row, frac) = DepositKernel::position(u);
+            assert_eq!(
+                (first, row, frac.to_bits()),
+                (k0 as i64 - DEPOSIT_LEAD, p, a.to_bits()),
+                "u = {u}"
+            );
+            let w = k.weights_at(row, frac);
+            let (r0, r1) = (&k.paired[p], &k.paired[p + 1]);
             assert!(
-                w.iter().zip(&w2).all(|(a, b)| a.to_bits() == b.to_bits()),
+                (0..2 * DEPOSIT_TAPS)
+                    .all(|m| w[m].to_bits() == (r0[m] + a * (r1[m] - r0[m])).to_bits()),
                 "u = {u}"
             );
         }
