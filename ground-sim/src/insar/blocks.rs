@@ -355,23 +355,11 @@ fn run_pass(
         0.5 * (whole.width - 1) as f64 * p,
         whole.mean_height_m(),
     ];
-    let mut heights = Vec::with_capacity(w * h);
-    for r in r0..r0 + h {
-        heights.extend_from_slice(&whole.heights_m[r * whole.width + c0..r * whole.width + c0 + w]);
-    }
-    let origin = [r0 as f64 * p, c0 as f64 * p];
-    let sdem = SarDem::new_checked(w, h, p, heights, origin)?;
+    let sdem = whole.crop(r0, c0, w, h)?;
+    let origin = sdem.origin_m;
     drop(whole);
     // The block mesh on the scene mesh's lattice when the mesh divides the DEM pixel.
-    let s = p / job.sar.mesh_spacing_m;
-    let mesh_offset = ((s - s.round()).abs() < 1e-9 && s >= 1.0).then(|| {
-        let s = s.round() as usize;
-        MeshOffset {
-            row: r0 * s,
-            col: c0 * s,
-            cells_wide: (scene.width() - 1) * s,
-        }
-    });
+    let mesh_offset = MeshOffset::for_block(p, job.sar.mesh_spacing_m, r0, c0, scene.width());
     let opts = SimOptions {
         progress: job.progress,
         scene: Some(SceneFrame {

@@ -302,23 +302,11 @@ fn run_sar_blocks(args: &SarArgs, cfg: &SarConfig, dem: &SarDem) -> anyhow::Resu
         let spec = layout.block(i)?;
         let e = spec.extent;
         let (r0, c0, w, h) = (e.row0, e.col0, e.width(), e.height());
-        let mut heights = Vec::with_capacity(w * h);
-        for r in r0..r0 + h {
-            heights.extend_from_slice(&dem.heights_m[r * dem.width + c0..r * dem.width + c0 + w]);
-        }
-        let origin = [r0 as f64 * p, c0 as f64 * p];
-        let block_dem = SarDem::new_checked(w, h, p, heights, origin)?;
-        // Speckle by place in the scene's mesh when the mesh divides the DEM pixel, so
-        // overlapping blocks see the same ground alike (as `insar` blocks do).
-        let s = p / cfg.mesh_spacing_m;
-        let mesh_offset = ((s - s.round()).abs() < 1e-9 && s >= 1.0).then(|| {
-            let s = s.round() as usize;
-            MeshOffset {
-                row: r0 * s,
-                col: c0 * s,
-                cells_wide: (dem.width - 1) * s,
-            }
-        });
+        let block_dem = dem.crop(r0, c0, w, h)?;
+        let origin = block_dem.origin_m;
+        // Speckle by place in the scene's mesh (as `insar` blocks do), so overlapping blocks
+        // see the same ground alike.
+        let mesh_offset = MeshOffset::for_block(p, cfg.mesh_spacing_m, r0, c0, dem.width);
         let noise_seed = splitmix64(cfg.seed ^ splitmix64(i as u64 + 1));
         let opts = SimOptions {
             progress: !args.no_progress,

@@ -106,6 +106,27 @@ impl SarDem {
         ]
     }
 
+    /// The `w × h` nodes from `(row0, col0)` as a DEM of their own, placed where they lie in
+    /// this one (origin moved by the offset).
+    pub fn crop(&self, row0: usize, col0: usize, w: usize, h: usize) -> SarResult<SarDem> {
+        if row0 + h > self.height || col0 + w > self.width {
+            return Err(SarError::Dem(format!(
+                "crop {w}×{h} from ({row0}, {col0}) outside {}×{}",
+                self.width, self.height
+            )));
+        }
+        let mut heights = Vec::with_capacity(w * h);
+        for r in row0..row0 + h {
+            let start = r * self.width + col0;
+            heights.extend_from_slice(&self.heights_m[start..start + w]);
+        }
+        let origin = [
+            self.origin_m[0] + row0 as f64 * self.pixel_m,
+            self.origin_m[1] + col0 as f64 * self.pixel_m,
+        ];
+        SarDem::new_checked(w, h, self.pixel_m, heights, origin)
+    }
+
     /// Mean height, m.
     pub fn mean_height_m(&self) -> f64 {
         self.heights_m.iter().map(|&h| f64::from(h)).sum::<f64>() / self.heights_m.len() as f64
@@ -487,6 +508,19 @@ pub fn fft_friendly_len(n: usize) -> usize {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn crop_keeps_heights_and_place() {
+        let heights: Vec<f32> = (0..20).map(|v| v as f32).collect();
+        let dem = SarDem::new_checked(5, 4, 10.0, heights, [100.0, 200.0]).unwrap();
+        let c = dem.crop(1, 2, 3, 2).unwrap();
+        assert_eq!((c.width, c.height, c.pixel_m), (3, 2, 10.0));
+        assert_eq!(c.heights_m, vec![7.0, 8.0, 9.0, 12.0, 13.0, 14.0]);
+        assert_eq!(c.origin_m, [110.0, 220.0]);
+        assert_eq!(c.node(1, 2), dem.node(2, 4));
+        assert!(dem.crop(3, 0, 5, 2).is_err());
+        assert!(dem.crop(0, 3, 3, 1).is_err());
+    }
 
     #[test]
     fn resampling_keeps_a_plane_exact() {

@@ -74,6 +74,30 @@ pub struct MeshOffset {
     pub cells_wide: usize,
 }
 
+impl MeshOffset {
+    /// The mesh of a block whose first DEM node is `(row0, col0)` of a scene `scene_width`
+    /// nodes wide, as a part of the scene's mesh — when the mesh spacing divides the DEM pixel
+    /// (then both meshes share one lattice); `None` otherwise (the block draws its own
+    /// speckle).
+    pub fn for_block(
+        dem_pixel_m: f64,
+        mesh_spacing_m: f64,
+        row0: usize,
+        col0: usize,
+        scene_width: usize,
+    ) -> Option<Self> {
+        let s = dem_pixel_m / mesh_spacing_m;
+        ((s - s.round()).abs() < 1e-9 && s >= 1.0).then(|| {
+            let s = s.round() as usize;
+            Self {
+                row: row0 * s,
+                col: col0 * s,
+                cells_wide: (scene_width - 1) * s,
+            }
+        })
+    }
+}
+
 impl Default for SimOptions {
     fn default() -> Self {
         Self {
