@@ -5,7 +5,7 @@ use crate::frame::{DemPatch, FrameError, SlopeBuffer, SlopeImage};
 use crate::matching::{Match, MatchConfig, MatchStats, match_features};
 use crate::msac::{Affine, Correspondence, MsacConfig, msac};
 use crate::pose::{Fix, GateConfig, NoFix, make_fix};
-use crate::refine::{RefineConfig, RefineError, Refined, refine};
+use crate::refine::{FrameInfo, RefineConfig, RefineError, Refined, refine};
 use crate::search::{SearchConfig, SearchError, SearchHit, search};
 use crate::surf::{Features, SurfConfig, SurfError, SurfWorkspace, extract};
 use crate::tile::Tile;
@@ -416,6 +416,20 @@ impl<'t> Navigator<'t> {
         Ok(report)
     }
 
+    /// What the refinement knows of a frame's slope image `img` (binned by `k`): the scale its
+    /// pixel size implies (tile pixels per unbinned frame pixel) and the border band whose
+    /// smoothing kernel was cut ([`crate::slope::smoothing_radius`]).
+    fn frame_info(&self, img: &SlopeImage<'_>, k: usize) -> FrameInfo {
+        let tile_m = self.tile.header().pixel_m();
+        let s = img.pixel_m() as f64 / k.max(1) as f64 / tile_m;
+        let sigma = self.frame_smoothing_px(img.pixel_m());
+        let r = crate::slope::smoothing_radius(sigma);
+        FrameInfo {
+            scale: (s.is_finite() && s > 0.0).then_some(s),
+            border_px: if r > 0 { r + 1 } else { 0 },
+        }
+    }
+
     /// Refine a feature fix over the frame's pixels (`img` binned by `k` from the
     /// `frame_w × frame_h` frame); an unrefinable fix stands as it was.
     fn refine_fix(
@@ -432,7 +446,14 @@ impl<'t> Navigator<'t> {
         let result = match self.tile.slope_raster() {
             None if self.cfg.refine.enabled => Err(RefineError::NoRaster),
             None => Err(RefineError::Disabled),
-            Some(raster) => refine(img, k, raster, &fix.affine, &self.cfg.refine),
+            Some(raster) => refine(
+                img,
+                k,
+                raster,
+                &fix.affine,
+                &self.frame_info(img, k),
+                &self.cfg.refine,
+            ),
         };
         if let Ok(r) = &result {
             *fix = fix.with_refinement(r, self.tile.header(), frame_w, frame_h);
@@ -483,7 +504,7 @@ impl<'t> Navigator<'t> {
             ..self.cfg.refine
         };
         // A refused hit leaves the refinement's verdict in the report (why no fix).
-        let r = match refine(img, k, raster, &hit.affine, &rcfg) {
+        let r = match refine(img, k, raster, &hit.affine, &self.frame_info(img, k), &rcfg) {
             Ok(r) if r.ncc_after >= self.cfg.gate.verify_min_ncc => r,
             Ok(_) => {
                 report.refine = Some(Err(RefineError::WorseCorrelation));

@@ -14,7 +14,9 @@
 //! biased by height noise; binning and smoothing change contrast). Frame gradients come from
 //! central differences on the frame's own pixel grid, the reference is sampled bilinearly, and
 //! residuals are Huber-weighted at twice the previous pass' RMS so dropouts and craters that
-//! changed do not pull the fit.
+//! changed do not pull the fit. Samples keep clear of the frame's border band, where the
+//! smoothing kernel was cut and the slope is biased ([`FrameInfo::border_px`]), and the scale
+//! takes a prior from the frame's own metric pixel size ([`RefineConfig::frame_scale_sigma`]).
 //!
 //! Bounds: at most [`MAX_ITERATIONS`] + 1 passes over at most [`RefineConfig::max_samples`]
 //! samples; no buffers (every sum is a register or stack scalar). Per-sample arithmetic is `f32`
@@ -58,6 +60,17 @@ pub struct RefineConfig {
     pub min_ncc: f32,
     /// Converged when an update moves every frame corner by less than this, tile pixels.
     pub converge_px: f32,
+    /// Relative 1σ of the frame's own scale: the ranging sensor grids its DEM frame in metres
+    /// (pixel size from its beam geometry and range), so the frame-to-tile scale is known to
+    /// about this much before any matching. Used as a prior on the warp's scale when the caller
+    /// passes the expected scale ([`refine`]'s `frame_scale`); 0 leaves the scale free.
+    ///
+    /// Why: on a bowl or a crater wall the slope grows nearly in proportion to the distance from
+    /// the crater's axis, so a scale change about the frame centre looks like a contrast change
+    /// (the photometric gain) plus a shift of the whole frame. With the scale free the fit trades
+    /// them, and a few percent of scale error became 10–20 m of position error that the
+    /// alignment residuals could not show (fresh-crater floor, Shackleton rim; docs/registration.md).
+    pub frame_scale_sigma: f32,
 }
 
 impl Default for RefineConfig {
@@ -70,6 +83,7 @@ impl Default for RefineConfig {
             max_shift_px: 12.0,
             min_ncc: 0.5,
             converge_px: 0.03,
+            frame_scale_sigma: 0.005,
         }
     }
 }
@@ -142,6 +156,23 @@ pub struct Refined {
     /// the covariances are inflated by (1 + ρ)/(1 − ρ), the variance factor of a mean of
     /// first-order correlated samples.
     pub correlation: f32,
+}
+
+/// What the caller knows about the frame beyond its slope image.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct FrameInfo {
+    /// The scale the frame's own pixel size implies, tile pixels per unbinned frame pixel
+    /// (frame metres per pixel / tile metres per pixel); with a positive
+    /// [`RefineConfig::frame_scale_sigma`] a prior on the warp's log-scale, weighted against the
+    /// residual variance so the covariances include it. `None` leaves the scale to the slopes.
+    pub scale: Option<f64>,
+    /// Slope-image pixels at each border to leave out: those whose smoothing kernel was cut by
+    /// the border ([`crate::slope::smoothing_radius`] + 1 for a smoothed image, 0 otherwise).
+    /// Their slope is biased in proportion to the terrain's slope, the same way on every
+    /// frame, where the reference (smoothed in the interior of a large map) has no such bias:
+    /// on steep ground that band pulled the fit by 10–20 m (docs/registration.md).
+    pub border_px: usize,
 }
 
 /// Similarity warp in centred frame coordinates: `X = M·(u − c) + t`, tile pixels.
@@ -224,6 +255,15 @@ impl Pass {
             0.0
         }
     }
+    /// Residual variance per sample, degrees², inflated for the residuals' correlation along
+    /// both axes of the sample grid (the effective number of independent samples shrinks by
+    /// both axes' factors).
+    fn sigma2(&self) -> f64 {
+        let rho = self.lag_correlation() as f64;
+        let rho_v = self.vertical_lag_correlation() as f64;
+        let inflate = (1.0 + rho) / (1.0 - rho) * (1.0 + rho_v) / (1.0 - rho_v);
+        self.see / (self.n as f64 - 6.0).max(1.0) * inflate
+    }
     fn rms(&self) -> f32 {
         if self.n == 0 {
             0.0
@@ -271,11 +311,14 @@ fn stride(w: usize, h: usize, budget: u32) -> usize {
     s
 }
 
+/// One pass over the sample grid: stride `st`, samples at least `lo` pixels from every border
+/// (their central differences reach `lo − 1`).
+#[allow(clippy::too_many_arguments)]
 fn pass(
     frame: &SlopeImage<'_>,
     raster: &SlopeRaster<'_>,
     warp: &Warp,
-    st: usize,
+    (st, lo): (usize, usize),
     centre: (f32, f32),
     photo: (f32, f32),
     huber: f32,
@@ -289,10 +332,10 @@ fn pass(
     let (g, o) = photo;
     let mut out = Pass::default();
     let half = st / 2;
-    let mut v = 1 + half;
+    let mut v = lo + half;
     // Residuals of the previous sample row (NaN = no valid sample there).
     let mut above = [f32::NAN; LAG_ROW];
-    while v + 1 < h {
+    while v + lo < h {
         let mut svlag = 0.0f32;
         let mut col = 0usize;
         let mut hr = [0.0f32; 21];
@@ -300,8 +343,8 @@ fn pass(
         let (mut sf, mut sr, mut sff, mut srr, mut sfr, mut see) =
             (0.0f32, 0.0f32, 0.0f32, 0.0f32, 0.0f32, 0.0f32);
         let (mut slag, mut prev) = (0.0f32, None::<f32>);
-        let mut u = 1 + half;
-        while u + 1 < w {
+        let mut u = lo + half;
+        while u + lo < w {
             let sample = (|| {
                 let f = deg(frame.get(u, v))?;
                 let fx = 0.5 * (deg(frame.get(u + 1, v))? - deg(frame.get(u - 1, v))?);
@@ -383,11 +426,14 @@ fn pass(
 /// `frame` is the slope image the features came from, `bin` the binning factor between it and
 /// the frame pixel coordinates of `initial` (frame pixel `x = bin·u + (bin − 1)/2` for image
 /// column `u`; 1 when unbinned). The result maps frame pixels (unbinned) to tile pixels.
+///
+/// `info` carries the frame's expected scale and the border band to leave out ([`FrameInfo`]).
 pub fn refine(
     frame: &SlopeImage<'_>,
     bin: usize,
     raster: &SlopeRaster<'_>,
     initial: &Affine,
+    info: &FrameInfo,
     cfg: &RefineConfig,
 ) -> Result<Refined, RefineError> {
     if !cfg.enabled {
@@ -419,7 +465,38 @@ pub fn refine(
             acc.max(libm::hypot(ax - bx, ay - by))
         })
     };
-    let st = stride(w.saturating_sub(2), h.saturating_sub(2), cfg.max_samples);
+    // Central differences need one pixel beyond each sample, outside the biased band.
+    let lo = info.border_px.saturating_add(1);
+    let st = stride(
+        w.saturating_sub(2 * lo),
+        h.saturating_sub(2 * lo),
+        cfg.max_samples,
+    );
+    // The scale prior as (log of the expected scale, 1σ of the log-scale).
+    let sig = cfg.frame_scale_sigma as f64;
+    let scale_prior = info
+        .scale
+        .filter(|s| s.is_finite() && *s > 0.0 && sig.is_finite() && sig > 0.0)
+        .map(|s| (libm::log(s), sig));
+    // Normal equations of a pass with the scale prior added. The warp's scale after an update
+    // z is s/|1 + z₀ + i·z₁| ≈ s·(1 − z₀), so the prior is one more residual
+    // ln s − ln s̄ − z₀, weighted by the pass' residual variance over the prior's.
+    let normal = |p: &Pass, warp: &Warp| {
+        let (mut hm, mut b) = (p.normal_matrix(), p.rhs());
+        if let Some((ln_expected, sig)) = scale_prior {
+            let s_now = libm::hypot(warp.m[0][0], warp.m[1][0]) / k;
+            let wt = p.sigma2() / (sig * sig);
+            if s_now > 0.0 && wt.is_finite() {
+                if let Some(h00) = hm.get_mut((0, 0)) {
+                    *h00 += wt;
+                }
+                if let Some(b0) = b.get_mut(0) {
+                    *b0 += wt * (libm::log(s_now) - ln_expected);
+                }
+            }
+        }
+        (hm, b)
+    };
     let centre = (uc as f32, vc as f32);
     let (mut g, mut o) = (1.0f32, 0.0f32);
     let mut huber = f32::INFINITY;
@@ -428,7 +505,7 @@ pub fn refine(
     let mut converged = false;
     let mut done = 0u8;
     let last = loop {
-        let p = pass(frame, raster, &warp, st, centre, (g, o), huber);
+        let p = pass(frame, raster, &warp, (st, lo), centre, (g, o), huber);
         if p.n < cfg.min_samples.max(8) {
             return Err(RefineError::TooFewSamples);
         }
@@ -439,10 +516,11 @@ pub fn refine(
             break p;
         }
         huber = (2.0 * p.rms()).max(1e-3);
-        let Some(chol) = p.normal_matrix().cholesky() else {
+        let (hm, b) = normal(&p, &warp);
+        let Some(chol) = hm.cholesky() else {
             return Err(RefineError::Singular);
         };
-        let z: [f64; 6] = chol.solve(&p.rhs()).into();
+        let z: [f64; 6] = chol.solve(&b).into();
         let [z0, z1, dx, dy, dg, d_o] = z;
         let (da, db) = (1.0 + z0, z1);
         let det = da * da + db * db;
@@ -486,16 +564,13 @@ pub fn refine(
     if !(ncc_after >= ncc_before - NCC_TOLERANCE && ncc_after >= cfg.min_ncc) {
         return Err(RefineError::WorseCorrelation);
     }
-    // Covariance of (da, db, dx, dy, g, o) from the final pass, inflated for correlation.
-    let Some(inv) = last.normal_matrix().cholesky().map(|c| c.inverse()) else {
+    // Covariance of (da, db, dx, dy, g, o) from the final pass (with the scale prior),
+    // inflated for correlation.
+    let Some(inv) = normal(&last, &warp).0.cholesky().map(|c| c.inverse()) else {
         return Err(RefineError::Singular);
     };
     let rho = last.lag_correlation() as f64;
-    let rho_v = last.vertical_lag_correlation() as f64;
-    // Residuals correlate along both axes of the sample grid: the effective number of
-    // independent samples shrinks by both axes' factors.
-    let inflate = (1.0 + rho) / (1.0 - rho) * (1.0 + rho_v) / (1.0 - rho_v);
-    let sigma2 = last.see / (last.n as f64 - 6.0).max(1.0) * inflate;
+    let sigma2 = last.sigma2();
     let cv = |i: usize, j: usize| sigma2 * inv.get((i, j)).copied().unwrap_or(f64::NAN);
     // The centre moves by −M·d: covariance M·Σ_dd·Mᵀ.
     let m = &warp.m;
@@ -631,6 +706,7 @@ mod tests {
             1,
             tile.slope_raster().unwrap(),
             &start,
+            &FrameInfo::default(),
             &RefineConfig::default(),
         )
         .unwrap();
@@ -647,6 +723,104 @@ mod tests {
             0.05,
         );
         assert!(r.ncc_after > r.ncc_before && r.ncc_after > 0.99, "{r:?}");
+    }
+
+    /// Slope of `heights` (`w × h`, 20 m pixels) smoothed by σ = 2 px, as the navigator
+    /// smooths frames and the ground smooths tiles.
+    fn smoothed_slope(heights: &[f32], w: usize, h: usize) -> Vec<SlopePx> {
+        let patch = crate::frame::DemPatch::new_checked(heights, w, h, 20.0).unwrap();
+        let mut px = vec![SLOPE_NODATA; w * h];
+        crate::slope::slope_into_binned_smoothed::<128>(&patch, 1, 2.0, &mut px, false).unwrap();
+        px
+    }
+
+    #[test]
+    fn the_border_band_of_a_smoothed_frame_is_left_out() {
+        // A crater wall: slope growing from 9° to 25° across the frame, with some texture.
+        let height = |x: f64, y: f64| {
+            0.06 * (x + 5.0) * (x + 5.0) + 4.0 * libm::sin(0.35 * x) * libm::cos(0.3 * y)
+        };
+        let grid = |w: usize, h: usize, dx: f64, dy: f64| -> Vec<f32> {
+            (0..w * h)
+                .map(|i| height((i % w) as f64 + dx, (i / w) as f64 + dy) as f32)
+                .collect()
+        };
+        let reference = smoothed_slope(&grid(W, W, 0.0, 0.0), W, W);
+        let bytes = tile_bytes(Some(&reference));
+        let tile = Tile::parse(&bytes).unwrap();
+        // The frame: 64 × 64 of the same ground at the same pixel, offset (15, 14), clear of
+        // the reference's own border band.
+        let px = smoothed_slope(&grid(64, 64, 15.0, 14.0), 64, 64);
+        let img = SlopeImage::new_checked(&px, 64, 64, 20.0).unwrap();
+        let truth = similarity_at(0.0, 1.0, 15.0, 14.0);
+        let start = similarity_at(0.3, 1.0, 15.4, 13.7);
+        let err = |border_px: usize| {
+            let info = FrameInfo {
+                scale: Some(1.0),
+                border_px,
+            };
+            let r = refine(
+                &img,
+                1,
+                tile.slope_raster().unwrap(),
+                &start,
+                &info,
+                &RefineConfig::default(),
+            )
+            .unwrap();
+            let (a, b) = r.affine.apply(31.5, 31.5);
+            let (c, d) = truth.apply(31.5, 31.5);
+            libm::hypot(a - c, b - d)
+        };
+        let border = crate::slope::smoothing_radius(2.0) + 1;
+        assert_eq!(border, 7);
+        // With the band the centre is pulled off by the cut kernels' bias; without it the
+        // fit is exact to the interpolation.
+        let (with_band, without) = (err(0), err(border));
+        std::println!("centre error: band kept {with_band:.4} px, left out {without:.4} px");
+        assert!(without < 0.02, "border left out: centre {without} px off");
+        assert!(
+            with_band > 5.0 * without && with_band > 0.05,
+            "border kept: centre {with_band} px off (left out: {without})"
+        );
+    }
+
+    #[test]
+    fn the_frame_scale_prior_enters_the_fit() {
+        let bytes = tile_bytes(Some(&reference()));
+        let tile = Tile::parse(&bytes).unwrap();
+        let truth = similarity_at(30.0, 0.8, 40.0, 20.0);
+        let px = frame(&truth);
+        let img = SlopeImage::new_checked(&px, 60, 60, 16.0).unwrap();
+        let start = similarity_at(31.5, 0.808, 41.0, 19.2);
+        let run = |scale: f64, sigma: f32| {
+            let cfg = RefineConfig {
+                frame_scale_sigma: sigma,
+                ..RefineConfig::default()
+            };
+            let info = FrameInfo {
+                scale: Some(scale),
+                border_px: 0,
+            };
+            refine(&img, 1, tile.slope_raster().unwrap(), &start, &info, &cfg).unwrap()
+        };
+        // The right scale with the default σ: the fit stays exact.
+        let r = run(0.8, RefineConfig::default().frame_scale_sigma);
+        assert!(
+            (similarity(&r.affine).scale / 0.8 - 1.0).abs() < 1e-3,
+            "{r:?}"
+        );
+        // A prior 2 % off and 100 times tighter than the data: it wins, and the scale's σ
+        // says so; with σ = 0 the slopes alone decide.
+        let tight = run(0.816, 1e-4);
+        let s = similarity(&tight.affine).scale;
+        assert!((s / 0.816 - 1.0).abs() < 2e-3, "scale {s}");
+        assert!(tight.scale_sigma < 2e-4, "{tight:?}");
+        let free = run(0.816, 0.0);
+        assert!(
+            (similarity(&free.affine).scale / 0.8 - 1.0).abs() < 1e-3,
+            "{free:?}"
+        );
     }
 
     #[test]
@@ -676,6 +850,7 @@ mod tests {
             2,
             tile.slope_raster().unwrap(),
             &start,
+            &FrameInfo::default(),
             &RefineConfig::default(),
         )
         .unwrap();
@@ -698,7 +873,7 @@ mod tests {
             ..cfg
         };
         assert_eq!(
-            refine(&img, 1, raster, &truth, &off),
+            refine(&img, 1, raster, &truth, &FrameInfo::default(), &off),
             Err(RefineError::Disabled)
         );
         // A flat frame against a flat reference: nothing to align.
@@ -713,6 +888,7 @@ mod tests {
                 1,
                 flat_tile.slope_raster().unwrap(),
                 &truth,
+                &FrameInfo::default(),
                 &cfg
             )
             .is_err()
@@ -721,18 +897,18 @@ mod tests {
         let empty = vec![SLOPE_NODATA; 60 * 60];
         let empty_img = SlopeImage::new_checked(&empty, 60, 60, 16.0).unwrap();
         assert_eq!(
-            refine(&empty_img, 1, raster, &truth, &cfg),
+            refine(&empty_img, 1, raster, &truth, &FrameInfo::default(), &cfg),
             Err(RefineError::TooFewSamples)
         );
         let outside = similarity_at(10.0, 0.8, 4000.0, 20.0);
         assert_eq!(
-            refine(&img, 1, raster, &outside, &cfg),
+            refine(&img, 1, raster, &outside, &FrameInfo::default(), &cfg),
             Err(RefineError::TooFewSamples)
         );
         // A start far from the truth (a wrong fix) must not be "confirmed": it either fails or
         // is refused for moving too far or correlating too little.
         let wrong = similarity_at(10.0, 0.8, 70.0, 60.0);
-        let r = refine(&img, 1, raster, &wrong, &cfg);
+        let r = refine(&img, 1, raster, &wrong, &FrameInfo::default(), &cfg);
         if let Ok(r) = r {
             assert_maps_agree(&r.affine, &truth, &[(30.0, 30.0)], 0.1);
         }
@@ -744,11 +920,11 @@ mod tests {
             n2: 0.0,
             ..truth
         };
-        assert!(refine(&img, 1, raster, &zero, &cfg).is_err());
+        assert!(refine(&img, 1, raster, &zero, &FrameInfo::default(), &cfg).is_err());
         let nan = Affine {
             m1: f64::NAN,
             ..truth
         };
-        assert!(refine(&img, 1, raster, &nan, &cfg).is_err());
+        assert!(refine(&img, 1, raster, &nan, &FrameInfo::default(), &cfg).is_err());
     }
 }

@@ -742,6 +742,7 @@ mod tests {
                 1,
                 raster,
                 &hit.affine,
+                &crate::refine::FrameInfo::default(),
                 &crate::refine::RefineConfig::default(),
             )
             .unwrap();

@@ -68,6 +68,22 @@ pub const MAX_SMOOTH_RADIUS: usize = 9;
 /// Rows of filled heights the vertical Gaussian pass keeps.
 const SMOOTH_RING: usize = 2 * MAX_SMOOTH_RADIUS + 1;
 
+/// Radius `R = min(⌈3σ⌉, MAX_SMOOTH_RADIUS)` of the Gaussian [`slope_into_binned_smoothed`]
+/// applies for `sigma_px` (0 for σ ≤ 0 or not finite), binned pixels.
+///
+/// Near the image border the Gaussian is cut and renormalised over the heights that exist, so
+/// a smoothed height there is the average of ground farther in: on a slope its height, and the
+/// slope between such heights, are biased (at the edge the slope of a plane comes out at about
+/// a third of its value, at 2σ in still 11 % low). Slope pixels closer than `R + 1` to the
+/// border carry that bias; [`crate::refine`] leaves them out.
+pub fn smoothing_radius(sigma_px: f32) -> usize {
+    if sigma_px > 0.0 && sigma_px.is_finite() {
+        libm::ceilf(3.0 * sigma_px).min(MAX_SMOOTH_RADIUS as f32) as usize
+    } else {
+        0
+    }
+}
+
 /// Gaussian weights `exp(−d²/2σ²)` for `d = 0..=R`, `R = min(⌈3σ⌉, MAX_SMOOTH_RADIUS)`
 /// (`R = 0`, no smoothing, for σ ≤ 0 or not finite). `libm`, so host and target agree bit for bit.
 fn gauss_weights(sigma_px: f32) -> ([f32; MAX_SMOOTH_RADIUS + 1], usize) {
@@ -76,7 +92,7 @@ fn gauss_weights(sigma_px: f32) -> ([f32; MAX_SMOOTH_RADIUS + 1], usize) {
     if !(sigma_px > 0.0 && sigma_px.is_finite()) {
         return (wt, 0);
     }
-    let r = libm::ceilf(3.0 * sigma_px).min(MAX_SMOOTH_RADIUS as f32) as usize;
+    let r = smoothing_radius(sigma_px);
     let inv = -0.5 / (sigma_px * sigma_px);
     for (d, w) in wt.iter_mut().enumerate().take(r + 1) {
         let x = d as f32;

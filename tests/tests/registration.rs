@@ -373,7 +373,9 @@ fn dense_check_does_not_confirm_wrong_starts() {
             p2: cy - ss * (phi.sin() * c + phi.cos() * c),
         };
         // The default settings must refuse or correct every wrong start.
-        if let Ok(r) = nav_core::refine::refine(&img, 1, raster, &start, &cfg.refine) {
+        if let Ok(r) =
+            nav_core::refine::refine(&img, 1, raster, &start, &Default::default(), &cfg.refine)
+        {
             let (ex, ey) = r.affine.apply(c, c);
             let (tx, ty) = ref_pose.to_frame(pose.x_m, pose.y_m, REF_W, REF_W);
             assert!(
@@ -387,7 +389,7 @@ fn dense_check_does_not_confirm_wrong_starts() {
             min_ncc: -1.0,
             ..cfg.refine
         };
-        match nav_core::refine::refine(&img, 1, raster, &start, &open) {
+        match nav_core::refine::refine(&img, 1, raster, &start, &Default::default(), &open) {
             Err(_) => failed += 1,
             Ok(r) => {
                 let (ex, ey) = r.affine.apply(c, c);
