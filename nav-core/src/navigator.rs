@@ -356,10 +356,11 @@ impl<'t> Navigator<'t> {
     ) -> Result<FrameReport, NavError> {
         let mut report = self.locate_features(ws, width, height, prior);
         let img = ws.slope.image()?;
-        self.refine_fix(&mut report, &img, k, width, height);
+        let info = self.frame_info(&img, k, true);
+        self.refine_fix(&mut report, &img, k, &info, width, height);
         self.prior_gate(&mut report, prior);
         if area_search {
-            self.area_search(&mut report, &img, k, width, height, prior);
+            self.area_search(&mut report, &img, k, &info, width, height, prior);
         }
         Ok(report)
     }
@@ -381,7 +382,8 @@ impl<'t> Navigator<'t> {
         prior: Option<&Prior>,
     ) -> Result<(), NavError> {
         let img = ws.slope.image()?;
-        self.area_search(report, &img, k, width, height, prior);
+        let info = self.frame_info(&img, k, true);
+        self.area_search(report, &img, k, &info, width, height, prior);
         Ok(())
     }
 
@@ -410,20 +412,34 @@ impl<'t> Navigator<'t> {
         } else {
             img
         };
-        self.refine_fix(&mut report, used, k, img.width(), img.height());
+        // A slope image comes as it is: no smoothing here, so no border band to leave out.
+        let info = self.frame_info(used, k, false);
+        self.refine_fix(&mut report, used, k, &info, img.width(), img.height());
         self.prior_gate(&mut report, prior);
-        self.area_search(&mut report, used, k, img.width(), img.height(), prior);
+        self.area_search(
+            &mut report,
+            used,
+            k,
+            &info,
+            img.width(),
+            img.height(),
+            prior,
+        );
         Ok(report)
     }
 
     /// What the refinement knows of a frame's slope image `img` (binned by `k`): the scale its
-    /// pixel size implies (tile pixels per unbinned frame pixel) and the border band whose
-    /// smoothing kernel was cut ([`crate::slope::smoothing_radius`]).
-    fn frame_info(&self, img: &SlopeImage<'_>, k: usize) -> FrameInfo {
+    /// pixel size implies (tile pixels per unbinned frame pixel) and, when nav-core smoothed
+    /// the heights it came from (`smoothed`: the DEM path, [`Self::extract_dem`]), the border
+    /// band whose smoothing kernel was cut ([`crate::slope::smoothing_radius`] + 1).
+    fn frame_info(&self, img: &SlopeImage<'_>, k: usize, smoothed: bool) -> FrameInfo {
         let tile_m = self.tile.header().pixel_m();
         let s = img.pixel_m() as f64 / k.max(1) as f64 / tile_m;
-        let sigma = self.frame_smoothing_px(img.pixel_m());
-        let r = crate::slope::smoothing_radius(sigma);
+        let r = if smoothed {
+            crate::slope::smoothing_radius(self.frame_smoothing_px(img.pixel_m()))
+        } else {
+            0
+        };
         FrameInfo {
             scale: (s.is_finite() && s > 0.0).then_some(s),
             border_px: if r > 0 { r + 1 } else { 0 },
@@ -437,6 +453,7 @@ impl<'t> Navigator<'t> {
         report: &mut FrameReport,
         img: &SlopeImage<'_>,
         k: usize,
+        info: &FrameInfo,
         frame_w: usize,
         frame_h: usize,
     ) {
@@ -446,14 +463,7 @@ impl<'t> Navigator<'t> {
         let result = match self.tile.slope_raster() {
             None if self.cfg.refine.enabled => Err(RefineError::NoRaster),
             None => Err(RefineError::Disabled),
-            Some(raster) => refine(
-                img,
-                k,
-                raster,
-                &fix.affine,
-                &self.frame_info(img, k),
-                &self.cfg.refine,
-            ),
+            Some(raster) => refine(img, k, raster, &fix.affine, info, &self.cfg.refine),
         };
         if let Ok(r) = &result {
             *fix = fix.with_refinement(r, self.tile.header(), frame_w, frame_h);
@@ -479,6 +489,7 @@ impl<'t> Navigator<'t> {
         report: &mut FrameReport,
         img: &SlopeImage<'_>,
         k: usize,
+        info: &FrameInfo,
         frame_w: usize,
         frame_h: usize,
         prior: Option<&Prior>,
@@ -504,7 +515,7 @@ impl<'t> Navigator<'t> {
             ..self.cfg.refine
         };
         // A refused hit leaves the refinement's verdict in the report (why no fix).
-        let r = match refine(img, k, raster, &hit.affine, &self.frame_info(img, k), &rcfg) {
+        let r = match refine(img, k, raster, &hit.affine, info, &rcfg) {
             Ok(r) if r.ncc_after >= self.cfg.gate.verify_min_ncc => r,
             Ok(_) => {
                 report.refine = Some(Err(RefineError::WorseCorrelation));

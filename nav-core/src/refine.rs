@@ -63,7 +63,7 @@ pub struct RefineConfig {
     /// Relative 1σ of the frame's own scale: the ranging sensor grids its DEM frame in metres
     /// (pixel size from its beam geometry and range), so the frame-to-tile scale is known to
     /// about this much before any matching. Used as a prior on the warp's scale when the caller
-    /// passes the expected scale ([`refine`]'s `frame_scale`); 0 leaves the scale free.
+    /// passes the expected scale ([`FrameInfo::scale`]); 0 leaves the scale free.
     ///
     /// Why: on a bowl or a crater wall the slope grows nearly in proportion to the distance from
     /// the crater's axis, so a scale change about the frame centre looks like a contrast change
@@ -142,9 +142,9 @@ pub struct Refined {
     /// Largest move of a frame corner from the feature fix, tile pixels.
     pub shift_px: f32,
     /// Covariance of the frame centre, tile pixels² (row-major 2 × 2): the Gauss–Newton
-    /// covariance σ²·H⁻¹ of the final pass, inflated for residuals correlated between
-    /// neighbouring samples (see [`Refined::correlation`]). It describes the alignment noise
-    /// only, not errors of the reference itself (an InSAR DEM's errors shift the whole frame
+    /// covariance σ²·H⁻¹ of the final pass (H with the scale prior's information when there
+    /// is one, [`FrameInfo::scale`]), inflated for residuals correlated between neighbouring
+    /// samples (see [`Refined::correlation`]). It describes the alignment noise only, not errors of the reference itself (an InSAR DEM's errors shift the whole frame
     /// alike): the fix adds the tile's `reference_sigma_m` to it
     /// ([`crate::pose::with_reference_error`]; measured in `docs/registration.md`, Covariance).
     pub center_cov_tile_px2: [[f64; 2]; 2],
@@ -313,7 +313,6 @@ fn stride(w: usize, h: usize, budget: u32) -> usize {
 
 /// One pass over the sample grid: stride `st`, samples at least `lo` pixels from every border
 /// (their central differences reach `lo − 1`).
-#[allow(clippy::too_many_arguments)]
 fn pass(
     frame: &SlopeImage<'_>,
     raster: &SlopeRaster<'_>,
@@ -465,8 +464,9 @@ pub fn refine(
             acc.max(libm::hypot(ax - bx, ay - by))
         })
     };
-    // Central differences need one pixel beyond each sample, outside the biased band.
-    let lo = info.border_px.saturating_add(1);
+    // Central differences need one pixel beyond each sample, outside the biased band (a band
+    // wider than the frame leaves no sample: too few samples, below).
+    let lo = info.border_px.min(w.max(h)).saturating_add(1);
     let st = stride(
         w.saturating_sub(2 * lo),
         h.saturating_sub(2 * lo),
@@ -820,6 +820,16 @@ mod tests {
         assert!(
             (similarity(&free.affine).scale / 0.8 - 1.0).abs() < 1e-3,
             "{free:?}"
+        );
+        // A prior as tight as the data (same relative σ, right scale): the information adds
+        // up, so the scale's σ shrinks by √2 — the prior is weighed against the residual
+        // variance, not in raw units.
+        let data = free.scale_sigma / 0.8;
+        let both = run(0.8, data as f32);
+        let ratio = both.scale_sigma / free.scale_sigma;
+        assert!(
+            (ratio * core::f64::consts::SQRT_2 - 1.0).abs() < 0.05,
+            "σ with prior / without: {ratio} (data σ {data})"
         );
     }
 
