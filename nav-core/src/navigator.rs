@@ -360,7 +360,7 @@ impl<'t> Navigator<'t> {
         self.refine_fix(&mut report, &img, k, &info, width, height);
         self.prior_gate(&mut report, prior);
         if area_search {
-            self.area_search(&mut report, &img, k, &info, width, height, prior);
+            self.area_search(&mut report, &img, k, &info, (width, height), prior);
         }
         Ok(report)
     }
@@ -383,7 +383,7 @@ impl<'t> Navigator<'t> {
     ) -> Result<(), NavError> {
         let img = ws.slope.image()?;
         let info = self.frame_info(&img, k, true);
-        self.area_search(report, &img, k, &info, width, height, prior);
+        self.area_search(report, &img, k, &info, (width, height), prior);
         Ok(())
     }
 
@@ -421,8 +421,7 @@ impl<'t> Navigator<'t> {
             used,
             k,
             &info,
-            img.width(),
-            img.height(),
+            (img.width(), img.height()),
             prior,
         );
         Ok(report)
@@ -490,8 +489,7 @@ impl<'t> Navigator<'t> {
         img: &SlopeImage<'_>,
         k: usize,
         info: &FrameInfo,
-        frame_w: usize,
-        frame_h: usize,
+        (frame_w, frame_h): (usize, usize),
         prior: Option<&Prior>,
     ) {
         let Some(p) = prior else { return };
