@@ -94,7 +94,8 @@ stop() {
 }
 trap stop EXIT
 
-if ! pgrep -x munged >/dev/null; then
+# munged's socket says it runs (no pgrep: procps need not be installed).
+if [[ ! -S /run/munge/munge.socket.2 ]]; then
     $SUDO mkdir -p /run/munge
     $SUDO chown munge:munge /run/munge 2>/dev/null || true
     $SUDO su -s /bin/sh munge -c /usr/sbin/munged 2>/dev/null || $SUDO /usr/sbin/munged --force
