@@ -4,32 +4,9 @@
 
 mod common;
 
+use common::{refused, run};
 use std::path::Path;
-use std::process::{Command, Output};
-
-fn exec(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_ground-sim"))
-        .args(args)
-        .output()
-        .expect("ground-sim runs")
-}
-
-fn run(args: &[&str]) -> String {
-    let out = exec(args);
-    let text = String::from_utf8_lossy(&out.stdout).to_string();
-    assert!(
-        out.status.success(),
-        "ground-sim {args:?} failed:\n{text}\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    text
-}
-
-fn refused(args: &[&str]) -> String {
-    let out = exec(args);
-    assert!(!out.status.success(), "ground-sim {args:?} should fail");
-    String::from_utf8_lossy(&out.stderr).to_string()
-}
+use std::process::Command;
 
 /// `bash tools/SCRIPT ARGS...` with this build's binary, `bin_dir` (a stand-in `sbatch`) first
 /// on `PATH`.

@@ -2,28 +2,10 @@
 //! one process or one at a time (`--block I/N`), blocks sit in the whole scene's SAR frame, and
 //! bad requests are refused with a reason.
 
+mod common;
+
+use common::{refused, run};
 use std::path::Path;
-use std::process::{Command, Output};
-
-fn exec(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_ground-sim"))
-        .args(args)
-        .output()
-        .expect("ground-sim runs")
-}
-
-fn run(args: &[&str]) -> String {
-    let out = exec(args);
-    let err = String::from_utf8_lossy(&out.stderr).to_string();
-    assert!(out.status.success(), "ground-sim {args:?} failed:\n{err}");
-    err
-}
-
-fn refused(args: &[&str]) -> String {
-    let out = exec(args);
-    assert!(!out.status.success(), "ground-sim {args:?} should fail");
-    String::from_utf8_lossy(&out.stderr).to_string()
-}
 
 fn json(p: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap()

@@ -6,33 +6,9 @@
 
 mod common;
 
+use common::{refused, run};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-
-fn ground_sim(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_ground-sim"))
-        .args(args)
-        .output()
-        .expect("ground-sim runs")
-}
-
-fn run(args: &[&str]) -> String {
-    let out = ground_sim(args);
-    let text = String::from_utf8_lossy(&out.stdout).to_string();
-    assert!(
-        out.status.success(),
-        "ground-sim {args:?} failed:\n{text}\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    text
-}
-
-/// Run `args` expecting failure; its stderr.
-fn fails(args: &[&str]) -> String {
-    let out = ground_sim(args);
-    assert!(!out.status.success(), "ground-sim {args:?} should fail");
-    String::from_utf8_lossy(&out.stderr).to_string()
-}
+use std::process::Command;
 
 fn s(p: &Path) -> &str {
     p.to_str().expect("utf-8 temp path")
@@ -203,7 +179,7 @@ fn merged_shards_equal_the_single_run_byte_for_byte() {
 
     // merge refuses what is not one whole campaign.
     let sh = |n: usize, i: usize| dir.path().join(format!("eval-{n}/shards/shard-{i}.json"));
-    let e = fails(&[
+    let e = refused(&[
         "merge",
         "--json",
         s(&dir.path().join("x.json")),
@@ -211,7 +187,7 @@ fn merged_shards_equal_the_single_run_byte_for_byte() {
         s(&sh(3, 2)),
     ]);
     assert!(e.contains("shard(s) 1/3 missing"), "{e}");
-    let e = fails(&[
+    let e = refused(&[
         "merge",
         "--json",
         s(&dir.path().join("x.json")),
@@ -220,7 +196,7 @@ fn merged_shards_equal_the_single_run_byte_for_byte() {
         s(&sh(3, 1)),
     ]);
     assert!(e.contains("shard 1/3 given twice"), "{e}");
-    let e = fails(&[
+    let e = refused(&[
         "merge",
         "--json",
         s(&dir.path().join("x.json")),
@@ -246,7 +222,7 @@ fn merged_shards_equal_the_single_run_byte_for_byte() {
         ],
     ]
     .concat());
-    let e = fails(&[
+    let e = refused(&[
         "merge",
         "--json",
         s(&dir.path().join("x.json")),
@@ -258,7 +234,7 @@ fn merged_shards_equal_the_single_run_byte_for_byte() {
         e.contains("different campaigns") && e.contains("seed: 5 vs 6"),
         "{e}"
     );
-    let e = fails(&[
+    let e = refused(&[
         "merge",
         "--json",
         s(&dir.path().join("x.json")),
@@ -279,7 +255,7 @@ fn shard_text_is_checked() {
     ] {
         // `=` so that clap reads `-1/3` as the value, not as a flag.
         let flag = format!("--shard={bad}");
-        let e = fails(&["eval", "--tile", "x", "--dem", "y", "--json", "z", &flag]);
+        let e = refused(&["eval", "--tile", "x", "--dem", "y", "--json", "z", &flag]);
         assert!(e.contains(why), "--shard {bad}: {e}");
     }
 }
