@@ -139,6 +139,18 @@ wait_jobs() {
 }
 job_ids() { sed -n 's/^submitted: shard array \([0-9]*\).*, merge \([0-9]*\) after.*/\1,\2/p; s/^submitted: block array \([0-9]*\).*, mosaic \([0-9]*\) after.*/\1,\2/p'; }
 
+# Print what a submission script said, then wait for the two jobs it names (array, merge).
+wait_submitted() {
+    local ids
+    echo "$1"
+    ids=$(job_ids <<<"$1")
+    if [[ -z $ids ]]; then
+        echo "ci-slurm: no job ids in: $1" >&2
+        return 1
+    fi
+    wait_jobs "$ids"
+}
+
 same() {
     if cmp -s "$1" "$2"; then
         echo "  same bytes: $(basename "$1")"
@@ -159,14 +171,7 @@ descent_args=(--tile ref --dem dem.tif --runs 4 --seed 2 --hop-min-m 2000 --hop-
 
 for cmd in eval descent; do
     if [[ $cmd == eval ]]; then args=("${eval_args[@]}"); else args=("${descent_args[@]}"); fi
-    sub=$(CPUS_PER_TASK=1 "$here/tools/slurm-campaign.sh" 3 "slurm-$cmd" "$cmd" "${args[@]}")
-    echo "$sub"
-    ids=$(job_ids <<<"$sub")
-    [[ -n $ids ]] || {
-        echo "ci-slurm: no job ids in: $sub" >&2
-        exit 1
-    }
-    wait_jobs "$ids"
+    wait_submitted "$(CPUS_PER_TASK=1 "$here/tools/slurm-campaign.sh" 3 "slurm-$cmd" "$cmd" "${args[@]}")"
     echo "$cmd: 3 Slurm shards + merge against one process"
     same single/$cmd.json "slurm-$cmd/$cmd.json"
 done
@@ -179,14 +184,7 @@ done
 "$bin" terrain --preset lola --seed 5 --size-m 1600 --pixel-m 10 --out map-dem.tif >/dev/null
 map_args=(--dem map-dem.tif --block-cells 40 --block-overlap-cells 8)
 "$bin" insar --out map-one --no-progress "${map_args[@]}" >/dev/null
-sub=$(CPUS_PER_TASK=1 MEM_PER_TASK=1G "$here/tools/slurm-insar-blocks.sh" map-slurm "${map_args[@]}")
-echo "$sub"
-ids=$(job_ids <<<"$sub")
-[[ -n $ids ]] || {
-    echo "ci-slurm: no job ids in: $sub" >&2
-    exit 1
-}
-wait_jobs "$ids"
+wait_submitted "$(CPUS_PER_TASK=1 MEM_PER_TASK=1G "$here/tools/slurm-insar-blocks.sh" map-slurm "${map_args[@]}")"
 echo "insar: 4 Slurm block tasks + mosaic against one process"
 n=0
 for f in map-one/*.tif map-one/*.png map-one/tile.bin map-one/tile.json; do
