@@ -94,22 +94,39 @@ stop() {
 }
 trap stop EXIT
 
-# munged's socket says it runs (no pgrep: procps need not be installed).
-if [[ ! -S /run/munge/munge.socket.2 ]]; then
+# munged: a socket file is no proof that it runs (a machine image taken while it ran keeps
+# /run/munge's socket and pid file, and every connection is refused), so ask it for a
+# credential; when it does not answer, clear what the dead one left and start it.
+munge_ok() { munge -n </dev/null 2>/dev/null | unmunge >/dev/null 2>&1; }
+if ! munge_ok; then
+    $SUDO rm -f /run/munge/munge.socket.2 /run/munge/munge.socket.2.lock /run/munge/munged.pid
     $SUDO mkdir -p /run/munge
     $SUDO chown munge:munge /run/munge 2>/dev/null || true
-    $SUDO su -s /bin/sh munge -c /usr/sbin/munged 2>/dev/null || $SUDO /usr/sbin/munged --force
+    if [[ -z $SUDO ]]; then
+        runuser -u munge -- /usr/sbin/munged || /usr/sbin/munged --force
+    else
+        $SUDO -u munge /usr/sbin/munged || $SUDO /usr/sbin/munged --force
+    fi
+    for _ in $(seq 1 20); do munge_ok && break; sleep 0.5; done
+    munge_ok || {
+        echo "ci-slurm: munged does not answer" >&2
+        $SUDO tail -20 /var/log/munge/munged.log >&2 || true
+        exit 1
+    }
 fi
+echo "munged answers"
 $SUDO env SLURM_CONF="$SLURM_CONF" /usr/sbin/slurmctld
 $SUDO env SLURM_CONF="$SLURM_CONF" /usr/sbin/slurmd
+# Bounded in time, not in tries: an sinfo that cannot authenticate waits ~50 s per call.
 up=0
-for _ in $(seq 1 60); do
-    if sinfo -h -o %t 2>/dev/null | grep -qx idle; then up=1 && break; fi
+t0=$SECONDS
+while ((SECONDS - t0 < 120)); do
+    if timeout 10 sinfo -h -o %t 2>/dev/null | grep -qx idle; then up=1 && break; fi
     sleep 1
 done
 ((up)) || {
-    echo "ci-slurm: the single-node Slurm did not come up" >&2
-    sinfo >&2 || true
+    echo "ci-slurm: the single-node Slurm did not come up in 120 s" >&2
+    timeout 10 sinfo >&2 || true
     exit 1
 }
 sinfo
@@ -120,7 +137,7 @@ sinfo
 # database is needed to ask it).
 wait_jobs() {
     local ids=$1 t0=$SECONDS q
-    while q=$(squeue -h -j "$ids" -o '%i %T %r' 2>/dev/null) && [[ -n $q ]]; do
+    while q=$(timeout 30 squeue -h -j "$ids" -o '%i %T %r' 2>/dev/null) && [[ -n $q ]]; do
         if grep -q DependencyNeverSatisfied <<<"$q" || ((SECONDS - t0 > 1800)); then
             echo "ci-slurm: jobs $ids will not finish:" >&2
             echo "$q" >&2
