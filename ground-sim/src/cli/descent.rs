@@ -84,6 +84,11 @@ pub struct Args {
     /// Summary JSON (with `--shard`: the shard file).
     #[arg(long)]
     pub json: PathBuf,
+    /// Also write every run's history at the frame rate to this CSV (one row per frame: time,
+    /// truth and estimate in the map frame, 1σ east/north, NEES, what aided the frame, the
+    /// fix), for analysis beyond the summary; with `--shard`, this shard's runs.
+    #[arg(long)]
+    pub histories: Option<PathBuf>,
     /// Folder for the trajectory and error pictures of the first run (default: beside the JSON;
     /// none with `--shard`: `merge` draws them).
     #[arg(long)]
@@ -335,8 +340,8 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
                     };
                     let out = fly(i, &terrain, &nav, ws, &cfg, r, t, fly_seed);
                     pb.set_position(done.fetch_add(1, Ordering::Relaxed) as u64 + 1);
-                    // Run 0 is the pictured one: keep its history.
-                    out.map(|r| DescentRecord::new(r, i == 0))
+                    // Run 0 is the pictured one: keep its history (all with --histories).
+                    out.map(|r| DescentRecord::new(r, i == 0 || a.histories.is_some()))
                 },
             )
             .collect()
@@ -351,6 +356,9 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         landing_zone: zone_cfg,
         reference: map_label,
     };
+    if let Some(path) = &a.histories {
+        write_histories(path, &records)?;
+    }
     if a.shard.shard.is_none() {
         let dir = a
             .png
@@ -379,6 +387,52 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         a.seed,
         a.json.display()
     );
+    Ok(())
+}
+
+/// One CSV row per recorded frame of every run that kept its history (positions in the map's
+/// east/north/up frame, metres; the fix state's codes are
+/// [`ground_sim::evaluation::descent::Sample::fix_state`]'s).
+fn write_histories(path: &Path, records: &[DescentRecord]) -> anyhow::Result<()> {
+    use std::io::Write;
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
+    let file =
+        std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;
+    let mut w = std::io::BufWriter::new(file);
+    writeln!(
+        w,
+        "run,t_s,truth_e_m,truth_n_m,truth_u_m,est_e_m,est_n_m,est_u_m,sigma_e_m,sigma_n_m,nees,fix_state,fix_e_m,fix_n_m"
+    )?;
+    for r in records {
+        for s in r.history.iter().flatten() {
+            let [fe, fn_] = s.fix_m.map_or([String::new(), String::new()], |f| {
+                [f[0].to_string(), f[1].to_string()]
+            });
+            writeln!(
+                w,
+                "{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+                r.result.run,
+                s.t_s,
+                s.truth_m[0],
+                s.truth_m[1],
+                s.truth_m[2],
+                s.est_m[0],
+                s.est_m[1],
+                s.est_m[2],
+                s.sigma_m[0],
+                s.sigma_m[1],
+                s.nees,
+                s.fix_state,
+                fe,
+                fn_
+            )?;
+        }
+    }
+    w.flush()
+        .with_context(|| format!("writing {}", path.display()))?;
+    println!("histories    {}", path.display());
     Ok(())
 }
 
