@@ -152,7 +152,14 @@ fn merged_shards_equal_the_single_run_byte_for_byte() {
     ];
     let single = dir.path().join("descent-single");
     let json = single.join("descent.json");
-    run(&[&["descent"][..], &descent_args, &["--json", s(&json)]].concat());
+    // With every run's history as CSV too: the summary must not change (the shards have none).
+    let histories = single.join("histories.csv");
+    run(&[
+        &["descent"][..],
+        &descent_args,
+        &["--json", s(&json), "--histories", s(&histories)],
+    ]
+    .concat());
     for n in [1, 3, 7] {
         let out = dir.path().join(format!("descent-{n}"));
         local_shards(n, &out, "descent", &descent_args);
@@ -176,6 +183,15 @@ fn merged_shards_equal_the_single_run_byte_for_byte() {
         serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     assert_eq!(d["runs"], 4, "{d}");
     assert!(d["fixes"].as_u64().unwrap() > 20, "{d}");
+    // The histories hold every run, and their accepted fixes (state 1) are the summary's.
+    let csv = std::fs::read_to_string(&histories).unwrap();
+    let mut lines = csv.lines();
+    assert!(lines.next().unwrap().starts_with("run,t_s,truth_e_m"));
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    let runs: std::collections::BTreeSet<&str> = rows.iter().map(|r| r[0]).collect();
+    assert_eq!(runs.into_iter().collect::<Vec<_>>(), ["0", "1", "2", "3"]);
+    let accepted = rows.iter().filter(|r| r[11] == "1").count() as u64;
+    assert_eq!(accepted, d["fixes"].as_u64().unwrap());
 
     // merge refuses what is not one whole campaign.
     let sh = |n: usize, i: usize| dir.path().join(format!("eval-{n}/shards/shard-{i}.json"));

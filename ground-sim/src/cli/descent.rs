@@ -85,8 +85,8 @@ pub struct Args {
     #[arg(long)]
     pub json: PathBuf,
     /// Also write every run's history at the frame rate to this CSV (one row per frame: time,
-    /// truth and estimate in the map frame, 1σ east/north, NEES, what aided the frame, the
-    /// fix), for analysis beyond the summary; with `--shard`, this shard's runs.
+    /// truth and estimate in the map frame, 1σ east/north, NEES, what aided the frame, the fix and
+    /// its covariance, an odometry offset), for analysis beyond the summary; with `--shard`, this shard's runs.
     #[arg(long)]
     pub histories: Option<PathBuf>,
     /// Folder for the trajectory and error pictures of the first run (default: beside the JSON;
@@ -403,16 +403,28 @@ fn write_histories(path: &Path, records: &[DescentRecord]) -> anyhow::Result<()>
     let mut w = std::io::BufWriter::new(file);
     writeln!(
         w,
-        "run,t_s,truth_e_m,truth_n_m,truth_u_m,est_e_m,est_n_m,est_u_m,sigma_e_m,sigma_n_m,nees,fix_state,fix_e_m,fix_n_m"
+        "run,t_s,truth_e_m,truth_n_m,truth_u_m,est_e_m,est_n_m,est_u_m,sigma_e_m,sigma_n_m,nees,fix_state,fix_e_m,fix_n_m,fix_cov_ee_m2,fix_cov_en_m2,fix_cov_nn_m2,offset_e_m,offset_n_m"
     )?;
     for r in records {
         for s in r.history.iter().flatten() {
             let [fe, fn_] = s.fix_m.map_or([String::new(), String::new()], |f| {
                 [f[0].to_string(), f[1].to_string()]
             });
+            let [oe, on] = s.offset_m.map_or([String::new(), String::new()], |o| {
+                [o[0].to_string(), o[1].to_string()]
+            });
+            let [cee, cen, cnn] =
+                s.fix_cov_m2
+                    .map_or([String::new(), String::new(), String::new()], |c| {
+                        [
+                            c[0][0].to_string(),
+                            c[0][1].to_string(),
+                            c[1][1].to_string(),
+                        ]
+                    });
             writeln!(
                 w,
-                "{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+                "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
                 r.result.run,
                 s.t_s,
                 s.truth_m[0],
@@ -426,7 +438,12 @@ fn write_histories(path: &Path, records: &[DescentRecord]) -> anyhow::Result<()>
                 s.nees,
                 s.fix_state,
                 fe,
-                fn_
+                fn_,
+                cee,
+                cen,
+                cnn,
+                oe,
+                on
             )?;
         }
     }

@@ -253,6 +253,14 @@ pub struct Sample {
     pub fix_state: u8,
     /// Fix position (if any), m.
     pub fix_m: Option<[f64; 2]>,
+    /// Covariance of the fix (east/north, m²) as nav-core reported it: a TRN fix's own, or an
+    /// odometry offset's (relative to the keyframe, whose error the filter carries).
+    #[serde(default)]
+    pub fix_cov_m2: Option<[[f64; 2]; 2]>,
+    /// An odometry offset's displacement since the keyframe (east/north, m), as measured; its
+    /// covariance is `fix_cov_m2`.
+    #[serde(default)]
+    pub offset_m: Option<[f64; 2]>,
 }
 
 /// Outcome of one hop. Undefined figures are NaN (JSON `null`, read back as NaN).
@@ -654,6 +662,8 @@ pub fn fly(
         }
         let mut fix_state = 0u8;
         let mut fix_m = None;
+        let mut fix_cov_m2 = None;
+        let mut offset_m = None;
         filt.update_altitude(
             p[2] + cfg.altimeter_sigma_m * normal(&mut rng),
             cfg.altimeter_sigma_m,
@@ -723,6 +733,7 @@ pub fn fly(
                                 * pixel_m,
                         };
                         fix_m = Some(f.center_geo_m);
+                        fix_cov_m2 = Some(cg);
                         match filt
                             .update_fix(&m)
                             .map_err(|e| anyhow::anyhow!("filter: {e}"))?
@@ -812,6 +823,8 @@ pub fn fly(
                             out.offsets_in_band += usize::from(NEES2_BAND_95.contains(&n));
                             odo_misses = 0;
                             fix_m = Some([k0[0] + o.east_m, k0[1] + o.north_m]);
+                            fix_cov_m2 = Some(o.cov_m2);
+                            offset_m = Some([o.east_m, o.north_m]);
                             let m = OffsetMeasurement {
                                 east_m: o.east_m,
                                 north_m: o.north_m,
@@ -953,6 +966,8 @@ pub fn fly(
             nees: nees2(p[0] - pe[0], p[1] - pe[1], c),
             fix_state,
             fix_m,
+            fix_cov_m2,
+            offset_m,
         });
     }
     if !landed {
