@@ -79,8 +79,11 @@ NodeName=$host NodeAddr=127.0.0.1 CPUs=$cpus RealMemory=$mem_mb State=UNKNOWN
 PartitionName=ci Nodes=$host Default=YES MaxTime=INFINITE State=UP
 CONF
 
+submitted_ids=""
 stop() {
     local rc=$?
+    # Jobs still queued or running would keep the cores busy after the daemons stop.
+    if [[ -n $submitted_ids ]]; then timeout 10 scancel ${submitted_ids//,/ } 2>/dev/null || true; fi
     for p in "$conf_dir/slurmd.pid" "$conf_dir/slurmctld.pid"; do
         if [[ -f $p ]]; then $SUDO kill "$(cat "$p")" 2>/dev/null || true; fi
     done
@@ -97,7 +100,8 @@ trap stop EXIT
 # munged: a socket file is no proof that it runs (a machine image taken while it ran keeps
 # /run/munge's socket and pid file, and every connection is refused), so ask it for a
 # credential; when it does not answer, clear what the dead one left and start it.
-munge_ok() { munge -n </dev/null 2>/dev/null | unmunge >/dev/null 2>&1; }
+# (The client retries a refused connection for a while: each probe is capped.)
+munge_ok() { timeout 5 munge -n </dev/null 2>/dev/null | timeout 5 unmunge >/dev/null 2>&1; }
 if ! munge_ok; then
     $SUDO rm -f /run/munge/munge.socket.2 /run/munge/munge.socket.2.lock /run/munge/munged.pid
     $SUDO mkdir -p /run/munge
@@ -107,7 +111,8 @@ if ! munge_ok; then
     else
         $SUDO -u munge /usr/sbin/munged || $SUDO /usr/sbin/munged --force
     fi
-    for _ in $(seq 1 20); do munge_ok && break; sleep 0.5; done
+    t0=$SECONDS
+    while ((SECONDS - t0 < 20)); do munge_ok && break; sleep 0.5; done
     munge_ok || {
         echo "ci-slurm: munged does not answer" >&2
         $SUDO tail -20 /var/log/munge/munged.log >&2 || true
@@ -131,14 +136,29 @@ done
 }
 sinfo
 
-# Wait until Slurm holds none of the jobs named in $1 (comma list); fail on a timeout, on a
+# Wait until Slurm holds none of the jobs named in $1 (comma list); fail after 10 min, on a
 # dependency that can no longer be met (a task failed before its afterok job), or when a job
 # ended other than COMPLETED (slurmctld keeps ended jobs for MinJobAge, 300 s; no accounting
 # database is needed to ask it).
 wait_jobs() {
     local ids=$1 t0=$SECONDS q
-    while q=$(timeout 30 squeue -h -j "$ids" -o '%i %T %r' 2>/dev/null) && [[ -n $q ]]; do
-        if grep -q DependencyNeverSatisfied <<<"$q" || ((SECONDS - t0 > 1800)); then
+    while true; do
+        # squeue fails once a job id has left the controller, and when it is slow: then ask
+        # scontrol whether any of the jobs is still live, and go on waiting if so.
+        if ! q=$(timeout 30 squeue -h -j "$ids" -o '%i %T %r' 2>/dev/null); then
+            local live
+            live=$(for id in ${ids//,/ }; do timeout 10 scontrol -o show job "$id" 2>/dev/null || true; done |
+                grep -cE 'JobState=(PENDING|CONFIGURING|RUNNING|COMPLETING|SUSPENDED)' || true)
+            [[ $live == 0 ]] && break
+            if ((SECONDS - t0 > 600)); then
+                echo "ci-slurm: squeue does not answer for jobs $ids" >&2
+                return 1
+            fi
+            sleep 2
+            continue
+        fi
+        [[ -n $q ]] || break
+        if grep -q DependencyNeverSatisfied <<<"$q" || ((SECONDS - t0 > 600)); then
             echo "ci-slurm: jobs $ids will not finish:" >&2
             echo "$q" >&2
             return 1
@@ -165,6 +185,7 @@ wait_submitted() {
         echo "ci-slurm: no job ids in: $1" >&2
         return 1
     fi
+    submitted_ids=${submitted_ids:+$submitted_ids,}$ids
     wait_jobs "$ids"
 }
 

@@ -192,6 +192,16 @@ fn merged_shards_equal_the_single_run_byte_for_byte() {
     assert_eq!(runs.into_iter().collect::<Vec<_>>(), ["0", "1", "2", "3"]);
     let accepted = rows.iter().filter(|r| r[11] == "1").count() as u64;
     assert_eq!(accepted, d["fixes"].as_u64().unwrap());
+    for r in &rows {
+        assert_eq!(r.len(), 19, "{r:?}");
+        // A TRN fix (accepted or gated) carries its covariance, an offset its displacement too.
+        let has = |i: usize| !r[i].is_empty();
+        match r[11] {
+            "1" | "2" => assert!(has(12) && has(14) && !has(17), "{r:?}"),
+            "4" | "5" => assert!(has(12) && has(14) && has(17) && has(18), "{r:?}"),
+            _ => assert!(!has(12) && !has(14) && !has(17), "{r:?}"),
+        }
+    }
 
     // merge refuses what is not one whole campaign.
     let sh = |n: usize, i: usize| dir.path().join(format!("eval-{n}/shards/shard-{i}.json"));

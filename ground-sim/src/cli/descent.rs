@@ -86,8 +86,9 @@ pub struct Args {
     pub json: PathBuf,
     /// Also write every run's history at the frame rate to this CSV (one row per frame: time,
     /// truth and estimate in the map frame, 1σ east/north, NEES, what aided the frame, the fix and
-    /// its covariance, an odometry offset), for analysis beyond the summary; with `--shard`, this shard's runs.
-    #[arg(long)]
+    /// its covariance, an odometry offset), for analysis beyond the summary. One process only
+    /// (not with `--shard`, whose tasks would write the same file).
+    #[arg(long, conflicts_with = "shard")]
     pub histories: Option<PathBuf>,
     /// Folder for the trajectory and error pictures of the first run (default: beside the JSON;
     /// none with `--shard`: `merge` draws them).
