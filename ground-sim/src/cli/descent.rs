@@ -408,21 +408,12 @@ fn write_histories(path: &Path, records: &[DescentRecord]) -> anyhow::Result<()>
     )?;
     for r in records {
         for s in r.history.iter().flatten() {
-            let [fe, fn_] = s.fix_m.map_or([String::new(), String::new()], |f| {
-                [f[0].to_string(), f[1].to_string()]
-            });
-            let [oe, on] = s.offset_m.map_or([String::new(), String::new()], |o| {
-                [o[0].to_string(), o[1].to_string()]
-            });
-            let [cee, cen, cnn] =
-                s.fix_cov_m2
-                    .map_or([String::new(), String::new(), String::new()], |c| {
-                        [
-                            c[0][0].to_string(),
-                            c[0][1].to_string(),
-                            c[1][1].to_string(),
-                        ]
-                    });
+            // An absent value is an empty field.
+            let opt = |v: Option<f64>| v.map_or(String::new(), |x| x.to_string());
+            let (fix, off, cov) = (s.fix_m, s.offset_m, s.fix_cov_m2);
+            let [fe, fn_] = [0, 1].map(|k| opt(fix.map(|f| f[k])));
+            let [oe, on] = [0, 1].map(|k| opt(off.map(|o| o[k])));
+            let [cee, cen, cnn] = [(0, 0), (0, 1), (1, 1)].map(|(a, b)| opt(cov.map(|c| c[a][b])));
             writeln!(
                 w,
                 "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",

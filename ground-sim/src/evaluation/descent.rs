@@ -440,7 +440,8 @@ pub struct DescentRecord {
     pub result: RunResult,
     /// Totals over its history.
     pub totals: HistoryTotals,
-    /// The history itself, kept for run 0 only (its pictures).
+    /// The history itself, kept for run 0 (its pictures), and for every run with `descent
+    /// --histories`.
     pub history: Option<Vec<Sample>>,
     /// Run 0's last hazard and confirmation maps (their pictures), so merged shards draw them
     /// too.

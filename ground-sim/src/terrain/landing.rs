@@ -19,7 +19,7 @@
 //!   net bowls left the zone 0.39 m lower on average with 0.37 m RMS over 20 m blocks (Shoemaker
 //!   16 km map, seed 4): ground that no map made from the coarse DEM shows, and which biased
 //!   every TRN fix of the descent's last minute by up to 1.5 m, growing as the frames shrank
-//!   onto the zone (docs/results.md, descent section, session 18).
+//!   onto the zone (docs/registration.md, "Landing zones and the map").
 //! - `w`: the taper, a smoothstep from 0 on the outermost pixel centres to 1 at `taper_m` inside
 //!   them, so that the zone's border equals the interpolated coarse DEM exactly (no seam).
 //! - roughness: a self-affine field ([`fractal_field`]) continuing the coarse scene's law
@@ -458,6 +458,9 @@ pub fn landing_zone(
 /// the pixels inside (renormalised), so no false low-pass leaks in from outside; the passes
 /// reach 3h pixels in, which the zone's taper covers on 10 m maps (30 m against 32 m) but not
 /// on coarser ones. Deterministic: each pass is a fixed-order running sum per row or column.
+/// Not [`crate::insar::pipeline::gaussian_filter`] (an exact kernel cut at 3σ, one thread): at
+/// σ = 40 zone pixels that is 241 taps per pixel and pass, ~2·10⁹ multiply-adds per 2048² zone
+/// and every descent run makes one; this costs 0.1–0.2 s (zone 1.16–1.20 s → 1.34–1.42 s).
 pub fn remove_coarse_scale(field: &mut [f32], n: usize, sigma_px: f64) {
     if n == 0 || field.len() != n * n || !(sigma_px.is_finite() && sigma_px > 0.0) {
         return;
