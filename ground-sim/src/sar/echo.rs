@@ -27,16 +27,38 @@ use rustfft::{Fft, FftPlanner};
 
 use super::config::{Derived, Polarisation, SarConfig};
 use super::geometry::{Antenna, EchoWindow, PulseGrid, fft_friendly_len};
-use super::kernel::{DEPOSIT_TAPS, DepositKernel, KERNEL_TAPS, cos_sin_turns_f32};
+use super::kernel::{DEPOSIT_LEAD, DEPOSIT_TAPS, DepositKernel, KERNEL_TAPS, cos_sin_turns_f32};
 use super::scattering::complex_gaussian;
 use super::scene::Scatterers;
 use super::{C32, C64, MAX_POLARISATIONS, SarError, SarResult};
 
-/// Accumulation buffers of one pulse in the fast echo method; facet `i` deposits into lane
-/// `i mod DEPOSIT_LANES`. Neighbouring facets fall on overlapping samples, and one buffer would
-/// make every deposit wait for the previous one's stores (store-to-load forwarding across
-/// misaligned vectors); separate lanes let the CPU overlap them.
-const DEPOSIT_LANES: usize = 4;
+/// Pulses simulated together in the fast echo method. Each scatterer's data is read once per
+/// block instead of once per pulse, and successive deposits alternate between the block's
+/// pulse buffers: neighbouring scatterers fall on overlapping samples, and depositing them
+/// one after the other into one buffer would make each wait for the previous one's stores.
+const PULSE_BLOCK: usize = 4;
+
+/// Which build of the echo deposit loop runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Isa {
+    /// The best the CPU has (AVX2 where present).
+    Detect,
+    /// The baseline build (SSE2 on x86-64).
+    #[cfg_attr(
+        not(test),
+        allow(dead_code, reason = "the tests compare the two builds")
+    )]
+    Baseline,
+}
+
+/// Length (complex samples) of each channel's accumulation buffer in the fast echo method:
+/// at least `nfft`, and `≡ 32 (mod 512)` so that the buffers of the pulses and channels start
+/// 256 bytes apart modulo 4 KiB. A CPU guesses whether a load depends on an earlier store from
+/// the low 12 address bits; buffers a multiple of 4 KiB apart (FFT-friendly lengths often are)
+/// would make each deposit wait on the previous one's stores into another buffer.
+fn deposit_stride(nfft: usize) -> usize {
+    nfft + (32 + 512 - nfft % 512) % 512
+}
 
 /// Raw (unfocused) echoes of one antenna for every simulated polarisation.
 ///
@@ -115,6 +137,57 @@ pub fn carrier(range_m: f64, wavelength_m: f64) -> C64 {
     C64::new(c, s)
 }
 
+/// What one antenna's pass needs of each scatterer that does not change from pulse to pulse:
+/// the zero-Doppler range `R0` and, taken from it once in f64, the fraction of the carrier
+/// phase and the echo-window position. Per pulse only `R − R0` is left, small enough (metres)
+/// for f32, so the per-pulse geometry runs four scatterers per SSE instruction instead of two.
+#[derive(Debug)]
+struct TrackGeometry {
+    /// `R0 = sqrt((y − y_A)² + (z − z_A)²)`, m (f32: it only enters `R − R0`'s denominator).
+    r0_m: Vec<f32>,
+    /// Fractional part of `2R0/λ`, turns, in [0, 1).
+    phase0_turns: Vec<f32>,
+    /// `⌊(R0 − r_first)/Δr⌋ − DEPOSIT_LEAD`, the deposit's first tap at zero squint, samples
+    /// (clamped to ±2·10⁹ so that a non-finite position lands far outside the window, where it
+    /// is counted).
+    gate0: Vec<i32>,
+    /// `(R0 − r_first)/Δr − ⌊…⌋`, samples, in [0, 1).
+    gate_frac0: Vec<f32>,
+    /// Half azimuth footprint, m.
+    half_m: Vec<f32>,
+}
+
+impl TrackGeometry {
+    fn new(sc: &Scatterers, antenna_yz: [f64; 2], window: &EchoWindow, wavelength_m: f64) -> Self {
+        let per: Vec<(f32, f32, i32, f32)> = sc
+            .y_m
+            .par_iter()
+            .zip(&sc.z_m)
+            .map(|(&y, &z)| {
+                let r0 = ((y - antenna_yz[0]).powi(2) + (z - antenna_yz[1]).powi(2)).sqrt();
+                let cycles = 2.0 * r0 / wavelength_m;
+                let phase = (cycles - cycles.floor()) as f32;
+                // The f32 fraction may round up to 1.0: the carrier does not care.
+                #[allow(clippy::manual_clamp, reason = "clamp keeps a NaN")]
+                let u = ((r0 - window.first_range_m) / window.spacing_m)
+                    .max(-2e9)
+                    .min(2e9);
+                let g = u.floor();
+                // |g| ≤ 2·10⁹: fits i32 with the lead and any clamped f32 offset added.
+                let gate = (g as i64 - DEPOSIT_LEAD) as i32;
+                (r0 as f32, phase, gate, (u - g) as f32)
+            })
+            .collect();
+        Self {
+            r0_m: per.iter().map(|p| p.0).collect(),
+            phase0_turns: per.iter().map(|p| p.1).collect(),
+            gate0: per.iter().map(|p| p.2).collect(),
+            gate_frac0: per.iter().map(|p| p.3).collect(),
+            half_m: sc.half_footprint_m.iter().map(|&h| h as f32).collect(),
+        }
+    }
+}
+
 impl EchoSimulator {
     /// Plan the FFTs and tabulate the chirp spectrum for a window and pulse grid.
     pub fn new(
@@ -183,16 +256,24 @@ impl EchoSimulator {
 
     /// Fast exact-equivalent echoes (see module docs). `antenna_yz` is the antenna track's
     /// `(y, z)`, m. Errors if a scatterer's kernel would fall outside the window.
-    #[allow(
-        clippy::needless_range_loop,
-        reason = "one index walks parallel SoA arrays"
-    )]
     pub fn simulate_fast(
         &self,
         sc: &Scatterers,
         antenna: Antenna,
         antenna_yz: [f64; 2],
         progress: &ProgressBar,
+    ) -> SarResult<RawEcho> {
+        self.simulate_fast_with(sc, antenna, antenna_yz, progress, Isa::Detect)
+    }
+
+    /// [`Self::simulate_fast`] with the instruction set chosen (tests compare the two).
+    pub(crate) fn simulate_fast_with(
+        &self,
+        sc: &Scatterers,
+        antenna: Antenna,
+        antenna_yz: [f64; 2],
+        progress: &ProgressBar,
+        isa: Isa,
     ) -> SarResult<RawEcho> {
         let npol = sc.polarisations.len();
         if npol == 0 || npol > MAX_POLARISATIONS {
@@ -201,7 +282,8 @@ impl EchoSimulator {
         let mut raw = self.empty(sc, antenna);
         let ns = self.window.samples;
         let nfft = self.fft_len;
-        let rho2 = Self::rho2(sc, antenna_yz);
+        let track = TrackGeometry::new(sc, antenna_yz, &self.window, self.wavelength_m);
+        let pol_stride = deposit_stride(nfft);
         let half_max = sc.max_half_footprint_m();
         let outside = AtomicUsize::new(0);
         let scratch_len = self
@@ -209,39 +291,41 @@ impl EchoSimulator {
             .get_inplace_scratch_len()
             .max(self.inv.get_inplace_scratch_len());
         raw.data
-            .par_chunks_mut(npol * ns)
+            .par_chunks_mut(PULSE_BLOCK * npol * ns)
             .enumerate()
             .for_each_init(
                 || {
                     (
-                        vec![C32::new(0.0, 0.0); DEPOSIT_LANES * npol * nfft],
+                        vec![C32::new(0.0, 0.0); PULSE_BLOCK * npol * pol_stride],
                         vec![C32::new(0.0, 0.0); scratch_len],
                     )
                 },
-                |(buf, scratch), (n, row)| {
+                |(buf, scratch), (b, rows)| {
                     buf.fill(C32::new(0.0, 0.0));
-                    let (lo, hi, xp) = self.footprint(sc, half_max, n);
-                    let missed = self.deposit_pulse(sc, &rho2, xp, lo..hi, buf);
+                    let n0 = b * PULSE_BLOCK;
+                    let count = rows.len() / (npol * ns);
+                    let (lo, _, _) = self.footprint(sc, half_max, n0);
+                    let (_, hi, _) = self.footprint(sc, half_max, n0 + count - 1);
+                    let xp: [f64; PULSE_BLOCK] =
+                        std::array::from_fn(|j| self.pulses.x(n0 + j.min(count - 1)));
+                    let missed =
+                        self.deposit_pulses(sc, &track, &xp[..count], lo..hi, buf, pol_stride, isa);
                     if missed > 0 {
                         outside.fetch_add(missed, Ordering::Relaxed);
                     }
-                    // Lanes summed in a fixed order: deterministic for a given facet order.
-                    let (first_lane, others) = buf.split_at_mut(npol * nfft);
-                    for other in others.chunks_exact(npol * nfft) {
-                        for (d, &v) in first_lane.iter_mut().zip(other) {
-                            *d += v;
+                    for (j, row) in rows.chunks_exact_mut(npol * ns).enumerate() {
+                        for p in 0..npol {
+                            let at = (j * npol + p) * pol_stride;
+                            let v = &mut buf[at..at + nfft];
+                            self.fwd.process_with_scratch(v, scratch);
+                            for (v, &h) in v.iter_mut().zip(&self.chirp_spectrum) {
+                                *v *= h;
+                            }
+                            self.inv.process_with_scratch(v, scratch);
+                            row[p * ns..(p + 1) * ns].copy_from_slice(&v[..ns]);
                         }
+                        progress.inc(1);
                     }
-                    for p in 0..npol {
-                        let b = &mut first_lane[p * nfft..(p + 1) * nfft];
-                        self.fwd.process_with_scratch(b, scratch);
-                        for (v, &h) in b.iter_mut().zip(&self.chirp_spectrum) {
-                            *v *= h;
-                        }
-                        self.inv.process_with_scratch(b, scratch);
-                        row[p * ns..(p + 1) * ns].copy_from_slice(&b[..ns]);
-                    }
-                    progress.inc(1);
                 },
             );
         let missed = outside.into_inner();
@@ -253,84 +337,159 @@ impl EchoSimulator {
         Ok(raw)
     }
 
-    /// Deposit every scatterer of `range` that pulse `xp` (along-track position, m) sees into
-    /// the accumulation lanes `buf` (`DEPOSIT_LANES × npol × fft_len` samples); returns how many
+    /// Deposit every scatterer of `range` that each pulse of `xp` (along-track positions, m,
+    /// at most [`PULSE_BLOCK`]) sees into that pulse's buffers in `buf` (`npol` buffers of
+    /// `pol_stride` samples per pulse, the first `fft_len` of each used); returns how many
     /// fell outside the echo window.
     ///
-    /// Two passes per chunk of scatterers: first the geometry of the whole chunk (range, delay,
-    /// carrier phase) in straight loops the compiler vectorises, then the kernel deposits.
-    /// Every value is the same arithmetic in the same order as a one-pass loop.
-    #[inline(never)]
-    fn deposit_pulse(
+    /// Per chunk of scatterers, first the geometry of the whole chunk for every pulse (range
+    /// increment, table position, carrier) in straight f32 loops the compiler vectorises four
+    /// wide, then the kernel deposits, scatterer by scatterer and pulse by pulse: a scatterer's
+    /// data is read once for the block of pulses, and consecutive deposits go to different
+    /// pulses' buffers, so none waits on the previous one's stores.
+    ///
+    /// On an x86-64 CPU with AVX2 the same code runs compiled for it (eight lanes instead of
+    /// four; found at run time, so one binary serves every machine). No FMA is enabled, so
+    /// every operation and its rounding are the baseline's: the echoes are bit-identical
+    /// either way (`sar::tests::avx2_echoes_are_the_baseline_bits`).
+    #[allow(
+        clippy::too_many_arguments,
+        reason = "internal: the block's whole state"
+    )]
+    fn deposit_pulses(
         &self,
         sc: &Scatterers,
-        rho2: &[f64],
-        xp: f64,
+        track: &TrackGeometry,
+        xp: &[f64],
         range: std::ops::Range<usize>,
         buf: &mut [C32],
+        pol_stride: usize,
+        isa: Isa,
+    ) -> usize {
+        #[cfg(target_arch = "x86_64")]
+        if isa == Isa::Detect && std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the one requirement of calling a function compiled for AVX2 is a CPU
+            // that has it, checked on the line above.
+            #[allow(
+                unsafe_code,
+                reason = "run-time dispatch to the AVX2 build of the loop"
+            )]
+            return unsafe { self.deposit_pulses_avx2(sc, track, xp, range, buf, pol_stride) };
+        }
+        let _ = isa;
+        self.deposit_pulses_body(sc, track, xp, range, buf, pol_stride)
+    }
+
+    /// [`Self::deposit_pulses_body`] compiled for AVX2 (without FMA: same roundings).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    #[inline(never)]
+    fn deposit_pulses_avx2(
+        &self,
+        sc: &Scatterers,
+        track: &TrackGeometry,
+        xp: &[f64],
+        range: std::ops::Range<usize>,
+        buf: &mut [C32],
+        pol_stride: usize,
+    ) -> usize {
+        self.deposit_pulses_body(sc, track, xp, range, buf, pol_stride)
+    }
+
+    /// The deposit loop of [`Self::deposit_pulses`], inlined into each instruction-set build.
+    #[allow(
+        clippy::needless_range_loop,
+        reason = "one index walks parallel SoA arrays"
+    )]
+    #[inline(always)]
+    fn deposit_pulses_body(
+        &self,
+        sc: &Scatterers,
+        track: &TrackGeometry,
+        xp: &[f64],
+        range: std::ops::Range<usize>,
+        buf: &mut [C32],
+        pol_stride: usize,
     ) -> usize {
         const CHUNK: usize = 64;
         let npol = sc.polarisations.len();
         let ns = self.window.samples;
-        let nfft = self.fft_len;
-        let inv_dr = 1.0 / self.window.spacing_m;
-        let r0 = self.window.first_range_m;
-        let two_over_lambda = 2.0 / self.wavelength_m;
+        let inv_dr = (1.0 / self.window.spacing_m) as f32;
+        let two_over_lambda = (2.0 / self.wavelength_m) as f32;
         let flat: &mut [f32] = bytemuck::cast_slice_mut(buf);
+        let pulses = xp.len().min(PULSE_BLOCK);
         let mut missed = 0usize;
-        let mut first = [0_i64; CHUNK];
-        let mut row = [0_usize; CHUNK];
-        let mut frac = [0.0_f32; CHUNK];
-        let mut amp = [[C32::new(0.0, 0.0); MAX_POLARISATIONS]; CHUNK];
-        let mut inside = [false; CHUNK];
+        let mut first = [[0_i32; CHUNK]; PULSE_BLOCK];
+        let mut row = [[0_u32; CHUNK]; PULSE_BLOCK];
+        let mut amp = [[[C32::new(0.0, 0.0); MAX_POLARISATIONS]; CHUNK]; PULSE_BLOCK];
+        let mut inside = [[false; CHUNK]; PULSE_BLOCK];
+        let mut dxs = [0.0_f32; CHUNK];
         let mut start = range.start;
         while start < range.end {
             let end = (start + CHUNK).min(range.end);
             let m = end - start;
-            let (xs, halves, rs, amps) = (
+            let (xs, halves, amps) = (
                 &sc.x_m[start..end],
-                &sc.half_footprint_m[start..end],
-                &rho2[start..end],
+                &track.half_m[start..end],
                 &sc.amplitude[start..end],
             );
-            // Geometry of the chunk: no branch, no libm, no saturating conversion.
-            for k in 0..m {
-                let dx = xs[k] - xp;
-                // Negated so that a NaN reaches the counted window check below.
-                inside[k] = !(dx.abs() > halves[k]);
-                let r = (rs[k] + dx * dx).sqrt();
-                // Bounded so the table position is defined; a NaN becomes far outside the
-                // window (max/min, unlike clamp, map NaN to a bound) and is counted below.
-                #[allow(clippy::manual_clamp, reason = "clamp keeps a NaN")]
-                let u = ((r - r0) * inv_dr).max(-1e9).min(1e9);
-                (first[k], row[k], frac[k]) = DepositKernel::position(u);
-                // exp(−i4πR/λ) = exp(−i2π·(2R/λ)).
-                let (c, s) = cos_sin_turns_f32(r * two_over_lambda);
-                let carrier = C32::new(c, -s);
-                amp[k] = std::array::from_fn(|p| amps[k][p] * carrier);
+            let (r0s, ph0s, g0s, gf0s) = (
+                &track.r0_m[start..end],
+                &track.phase0_turns[start..end],
+                &track.gate0[start..end],
+                &track.gate_frac0[start..end],
+            );
+            for j in 0..pulses {
+                // Along-track offsets first: the f64 subtraction runs two lanes wide, and on
+                // its own it lets the f32 loop below run four.
+                for k in 0..m {
+                    dxs[k] = (xs[k] - xp[j]) as f32;
+                }
+                let (inside, first, row, amp) =
+                    (&mut inside[j], &mut first[j], &mut row[j], &mut amp[j]);
+                // Geometry of the chunk: no branch, no libm, no saturating conversion.
+                for k in 0..m {
+                    let dx = dxs[k];
+                    // Negated so that a NaN reaches the counted window check below.
+                    inside[k] = !(dx.abs() > halves[k]);
+                    // R − R0 = dx²/(R0 + R), without the cancellation of R − R0: f32 keeps it
+                    // to ~10⁻⁷ of itself (metres at most), where R itself needs f64.
+                    let dx2 = dx * dx;
+                    let r0 = r0s[k];
+                    let dr = dx2 / (r0 + (r0 * r0 + dx2).sqrt());
+                    let (f, row_k) = DepositKernel::position(gf0s[k] + dr * inv_dr);
+                    // Both within ±2.1·10⁹: no overflow.
+                    first[k] = g0s[k] + f;
+                    row[k] = row_k;
+                    // exp(−i4πR/λ) = exp(−i2π·(2R0/λ + 2(R − R0)/λ)), the first term's
+                    // fraction taken in f64 once per scatterer.
+                    let (c, s) = cos_sin_turns_f32(ph0s[k] + dr * two_over_lambda);
+                    let carrier = C32::new(c, -s);
+                    amp[k] = std::array::from_fn(|p| amps[k][p] * carrier);
+                }
             }
             for k in 0..m {
-                if !inside[k] {
-                    continue;
-                }
-                let i = start + k;
-                if first[k] < 0 || first[k] as usize + DEPOSIT_TAPS > ns {
-                    missed += 1;
-                    continue;
-                }
-                let base = first[k] as usize;
-                let w = self.kernel.weights_at(row[k], frac[k]);
-                let lane = (i % DEPOSIT_LANES) * npol * nfft;
-                for (p, &a) in amp[k].iter().enumerate().take(npol) {
-                    // Interleaved re/im against paired weights: the same products and sums
-                    // as `d += a·w` per complex sample, in vector lanes.
-                    let aa: [f32; 2 * DEPOSIT_TAPS] =
-                        std::array::from_fn(|k| if k % 2 == 0 { a.re } else { a.im });
-                    let at = 2 * (lane + p * nfft + base);
-                    // In range: base + DEPOSIT_TAPS ≤ ns ≤ nfft was checked above.
-                    let dst = &mut flat[at..at + 2 * DEPOSIT_TAPS];
-                    for ((d, &wk), &ak) in dst.iter_mut().zip(w.iter()).zip(aa.iter()) {
-                        *d += ak * wk;
+                for j in 0..pulses {
+                    if !inside[j][k] {
+                        continue;
+                    }
+                    let f = first[j][k];
+                    if f < 0 || f as usize + DEPOSIT_TAPS > ns {
+                        missed += 1;
+                        continue;
+                    }
+                    let w = self.kernel.weights(row[j][k] as usize);
+                    for (p, &a) in amp[j][k].iter().enumerate().take(npol) {
+                        // Interleaved re/im against paired weights: the same products and
+                        // sums as `d += a·w` per complex sample, in vector lanes.
+                        let aa: [f32; 2 * DEPOSIT_TAPS] =
+                            std::array::from_fn(|q| if q % 2 == 0 { a.re } else { a.im });
+                        let at = 2 * ((j * npol + p) * pol_stride + f as usize);
+                        // In range: f + DEPOSIT_TAPS ≤ ns ≤ pol_stride was checked above.
+                        let dst = &mut flat[at..at + 2 * DEPOSIT_TAPS];
+                        for ((d, &wk), &ak) in dst.iter_mut().zip(w.iter()).zip(aa.iter()) {
+                            *d += ak * wk;
+                        }
                     }
                 }
             }

@@ -31,8 +31,9 @@
 //!
 //! ## Bounds
 //!
-//! The interpolation kernel has [`kernel::KERNEL_TAPS`] taps and the echo deposit kernel
-//! [`kernel::DEPOSIT_TAPS`], both tabulated at [`kernel::KERNEL_PHASES`] fractional delays; [`MAX_POLARISATIONS`] polarisations are simulated
+//! The interpolation kernel has [`kernel::KERNEL_TAPS`] taps tabulated at
+//! [`kernel::KERNEL_PHASES`] fractional delays, the echo deposit kernel
+//! [`kernel::DEPOSIT_TAPS`] at [`kernel::DEPOSIT_PHASES`]; [`MAX_POLARISATIONS`] polarisations are simulated
 //! at once. Memory grows with `pulses × echo samples × polarisations` (8 bytes per complex
 //! sample) and with the facet count (about 100 bytes per facet).
 

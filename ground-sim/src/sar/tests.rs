@@ -267,3 +267,41 @@ fn thermal_noise_floor_is_the_configured_nesz() {
     }
     assert!(c.norm() / (p1 * p2).sqrt() < 0.05);
 }
+
+#[test]
+fn avx2_echoes_are_the_baseline_bits() {
+    use super::echo::{EchoSimulator, Isa};
+    use super::geometry::{AcquisitionPlan, Geometry};
+    use super::scene::{build_facets, facet_scatterers};
+    let cfg = quiet(SarConfig::default());
+    let d = cfg.derived().unwrap();
+    let dem = analytic_dem(AnalyticSurface::Hill, 12, 5.0).unwrap();
+    let g = Geometry::new(&dem, &cfg, &d).unwrap();
+    let plan = AcquisitionPlan::new(&dem, &cfg, &d, g).unwrap();
+    let facets = build_facets(&dem, &plan.geometry).unwrap();
+    let (scat, _) = facet_scatterers(&facets, &plan.geometry, &cfg, 1.0);
+    let sim = EchoSimulator::new(&cfg, &d, plan.window, plan.pulses).unwrap();
+    let hidden = indicatif::ProgressBar::hidden();
+    #[cfg(target_arch = "x86_64")]
+    eprintln!(
+        "this CPU has AVX2: {} (without it both runs take the baseline build)",
+        std::arch::is_x86_feature_detected!("avx2")
+    );
+    for antenna in [Antenna::A1, Antenna::A2] {
+        let yz = plan.geometry.antenna_yz(antenna);
+        let run = |isa| {
+            sim.simulate_fast_with(&scat, antenna, yz, &hidden, isa)
+                .unwrap()
+        };
+        let (best, base) = (run(Isa::Detect), run(Isa::Baseline));
+        assert_eq!(best.data.len(), base.data.len());
+        let differ = best
+            .data
+            .iter()
+            .zip(&base.data)
+            .filter(|(a, b)| a.re.to_bits() != b.re.to_bits() || a.im.to_bits() != b.im.to_bits())
+            .count();
+        assert_eq!(differ, 0, "{antenna:?}: {differ} samples differ");
+        assert!(base.data.iter().any(|v| v.norm_sqr() > 0.0));
+    }
+}
