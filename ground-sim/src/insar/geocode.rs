@@ -353,7 +353,7 @@ pub fn eq20_mask(
 /// (shadow) or folds its echo onto (layover). Only cells within `reach_m` of ground range of
 /// each other are compared (the reach of the scene's highest wall, see
 /// `pipeline::fold_reach_m`; infinite for the truth), so one wrong height cannot mark a whole
-/// row. Cost: `O(width·height·reach/pixel)`.
+/// row. Cost: `O(width·height)` (sliding-window extremes), rows in parallel.
 pub fn ray_trace_mask(
     heights: &[f64],
     tol_m: &[f64],

@@ -51,6 +51,19 @@ pub(crate) enum Isa {
     Baseline,
 }
 
+/// Refuse scatterers with a non-finite along-track position: the pulses find the scatterers
+/// they see by a binary search on `x`, which would pass such a scatterer over (or, for a NaN,
+/// lose the order the search needs) without counting it anywhere.
+fn check_along_track(sc: &Scatterers) -> SarResult<()> {
+    let bad = sc.x_m.iter().filter(|x| !x.is_finite()).count();
+    if bad > 0 {
+        return Err(SarError::Bound(format!(
+            "{bad} scatterers have a non-finite along-track position"
+        )));
+    }
+    Ok(())
+}
+
 /// Length (complex samples) of each channel's accumulation buffer in the fast echo method:
 /// at least `nfft`, and `≡ 32 (mod 512)` so that the buffers of the pulses and channels start
 /// 256 bytes apart modulo 4 KiB. A CPU guesses whether a load depends on an earlier store from
@@ -279,6 +292,7 @@ impl EchoSimulator {
         if npol == 0 || npol > MAX_POLARISATIONS {
             return Err(SarError::Config("scatterers carry no polarisation".into()));
         }
+        check_along_track(sc)?;
         let mut raw = self.empty(sc, antenna);
         let ns = self.window.samples;
         let nfft = self.fft_len;
@@ -440,7 +454,7 @@ impl EchoSimulator {
                 &track.gate_frac0[start..end],
             );
             for j in 0..pulses {
-                // Along-track offsets first: the f64 subtraction runs two lanes wide, and on
+                // Along-track offsets first: the f64 subtraction runs two (AVX2: four) lanes wide, and on
                 // its own it lets the f32 loop below run four.
                 for k in 0..m {
                     dxs[k] = (xs[k] - xp[j]) as f32;
@@ -511,6 +525,7 @@ impl EchoSimulator {
         antenna_yz: [f64; 2],
     ) -> SarResult<RawEcho> {
         let npol = sc.polarisations.len();
+        check_along_track(sc)?;
         let mut raw = self.empty(sc, antenna);
         let ns = self.window.samples;
         let rho2 = Self::rho2(sc, antenna_yz);

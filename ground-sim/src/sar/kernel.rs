@@ -304,12 +304,12 @@ mod tests {
         let w = k.weights(row as usize);
         assert!(w.chunks_exact(2).all(|p| p[0].to_bits() == p[1].to_bits()));
         // The branch-free table position is the plain one: ⌊v⌋ and the nearest row of the
-        // fractional part (a fraction rounding up to the next whole sample takes the last row,
-        // which is the next sample's row 0 shifted by one).
+        // fractional part, ⌊g + ½⌋ in f32 (a fraction rounding up to the next whole sample
+        // takes the last row, which is the next sample's row 0 shifted by one).
         for i in 0..4000 {
             let v = -3.0 + i as f32 * 0.618_034 + 1e-4 * (i % 7) as f32;
             let k0 = v.floor();
-            let row = ((v - k0) * DEPOSIT_PHASES as f32).round() as u32;
+            let row = ((v - k0) * DEPOSIT_PHASES as f32 + 0.5).floor() as u32;
             assert_eq!(DepositKernel::position(v), (k0 as i32, row), "v = {v}");
         }
         assert!(DepositKernel::position(f32::NAN).0 <= -2_000_000);

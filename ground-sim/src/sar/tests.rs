@@ -304,4 +304,15 @@ fn avx2_echoes_are_the_baseline_bits() {
         assert_eq!(differ, 0, "{antenna:?}: {differ} samples differ");
         assert!(base.data.iter().any(|v| v.norm_sqr() > 0.0));
     }
+    // A scatterer the pulses' search on `x` cannot place is an error, not a silent gap.
+    let mut bad = scat.clone();
+    bad.x_m[0] = f64::NAN;
+    let yz = plan.geometry.antenna_yz(Antenna::A1);
+    for isa in [Isa::Detect, Isa::Baseline] {
+        let e = sim
+            .simulate_fast_with(&bad, Antenna::A1, yz, &hidden, isa)
+            .unwrap_err();
+        assert!(e.to_string().contains("non-finite"), "{e}");
+    }
+    assert!(sim.simulate_time_domain(&bad, Antenna::A1, yz).is_err());
 }
