@@ -64,11 +64,26 @@ fn check_along_track(sc: &Scatterers) -> SarResult<()> {
     Ok(())
 }
 
+/// One block of pulses for the deposit loop.
+struct PulseBlock<'a> {
+    sc: &'a Scatterers,
+    /// The scatterers' per-pass geometry.
+    track: &'a TrackGeometry,
+    /// Along-track positions of the block's pulses, m (at most [`PULSE_BLOCK`]).
+    xp: &'a [f64],
+    /// Scatterers any pulse of the block may see (indices into `sc`).
+    range: std::ops::Range<usize>,
+    /// Samples from one channel's accumulation buffer to the next ([`deposit_stride`]).
+    pol_stride: usize,
+}
+
 /// Length (complex samples) of each channel's accumulation buffer in the fast echo method:
 /// at least `nfft`, and `≡ 32 (mod 512)` so that the buffers of the pulses and channels start
 /// 256 bytes apart modulo 4 KiB. A CPU guesses whether a load depends on an earlier store from
 /// the low 12 address bits; buffers a multiple of 4 KiB apart (FFT-friendly lengths often are)
-/// would make each deposit wait on the previous one's stores into another buffer.
+/// would make each deposit wait on the previous one's stores into another buffer. A guard,
+/// not a measured gain: on the one layout tried (4 lanes per pulse, before the pulse blocks)
+/// its effect did not stand out of this machine's ±10 % run-to-run noise.
 fn deposit_stride(nfft: usize) -> usize {
     nfft + (32 + 512 - nfft % 512) % 512
 }
@@ -322,8 +337,14 @@ impl EchoSimulator {
                     let (_, hi, _) = self.footprint(sc, half_max, n0 + count - 1);
                     let xp: [f64; PULSE_BLOCK] =
                         std::array::from_fn(|j| self.pulses.x(n0 + j.min(count - 1)));
-                    let missed =
-                        self.deposit_pulses(sc, &track, &xp[..count], lo..hi, buf, pol_stride, isa);
+                    let block = PulseBlock {
+                        sc,
+                        track: &track,
+                        xp: &xp[..count],
+                        range: lo..hi,
+                        pol_stride,
+                    };
+                    let missed = self.deposit_pulses(&block, buf, isa);
                     if missed > 0 {
                         outside.fetch_add(missed, Ordering::Relaxed);
                     }
@@ -351,10 +372,9 @@ impl EchoSimulator {
         Ok(raw)
     }
 
-    /// Deposit every scatterer of `range` that each pulse of `xp` (along-track positions, m,
-    /// at most [`PULSE_BLOCK`]) sees into that pulse's buffers in `buf` (`npol` buffers of
-    /// `pol_stride` samples per pulse, the first `fft_len` of each used); returns how many
-    /// fell outside the echo window.
+    /// Deposit every scatterer of `block.range` that each pulse of the block sees into that
+    /// pulse's buffers in `buf` (`npol` buffers of `block.pol_stride` samples per pulse, the
+    /// first `fft_len` of each used); returns how many fell outside the echo window.
     ///
     /// Per chunk of scatterers, first the geometry of the whole chunk for every pulse (range
     /// increment, table position, carrier) in straight f32 loops the compiler vectorises four
@@ -366,20 +386,7 @@ impl EchoSimulator {
     /// four; found at run time, so one binary serves every machine). No FMA is enabled, so
     /// every operation and its rounding are the baseline's: the echoes are bit-identical
     /// either way (`sar::tests::avx2_echoes_are_the_baseline_bits`).
-    #[allow(
-        clippy::too_many_arguments,
-        reason = "internal: the block's whole state"
-    )]
-    fn deposit_pulses(
-        &self,
-        sc: &Scatterers,
-        track: &TrackGeometry,
-        xp: &[f64],
-        range: std::ops::Range<usize>,
-        buf: &mut [C32],
-        pol_stride: usize,
-        isa: Isa,
-    ) -> usize {
+    fn deposit_pulses(&self, block: &PulseBlock<'_>, buf: &mut [C32], isa: Isa) -> usize {
         #[cfg(target_arch = "x86_64")]
         if isa == Isa::Detect && std::arch::is_x86_feature_detected!("avx2") {
             // SAFETY: the one requirement of calling a function compiled for AVX2 is a CPU
@@ -388,26 +395,18 @@ impl EchoSimulator {
                 unsafe_code,
                 reason = "run-time dispatch to the AVX2 build of the loop"
             )]
-            return unsafe { self.deposit_pulses_avx2(sc, track, xp, range, buf, pol_stride) };
+            return unsafe { self.deposit_pulses_avx2(block, buf) };
         }
         let _ = isa;
-        self.deposit_pulses_body(sc, track, xp, range, buf, pol_stride)
+        self.deposit_pulses_body(block, buf)
     }
 
     /// [`Self::deposit_pulses_body`] compiled for AVX2 (without FMA: same roundings).
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
     #[inline(never)]
-    fn deposit_pulses_avx2(
-        &self,
-        sc: &Scatterers,
-        track: &TrackGeometry,
-        xp: &[f64],
-        range: std::ops::Range<usize>,
-        buf: &mut [C32],
-        pol_stride: usize,
-    ) -> usize {
-        self.deposit_pulses_body(sc, track, xp, range, buf, pol_stride)
+    fn deposit_pulses_avx2(&self, block: &PulseBlock<'_>, buf: &mut [C32]) -> usize {
+        self.deposit_pulses_body(block, buf)
     }
 
     /// The deposit loop of [`Self::deposit_pulses`], inlined into each instruction-set build.
@@ -416,15 +415,15 @@ impl EchoSimulator {
         reason = "one index walks parallel SoA arrays"
     )]
     #[inline(always)]
-    fn deposit_pulses_body(
-        &self,
-        sc: &Scatterers,
-        track: &TrackGeometry,
-        xp: &[f64],
-        range: std::ops::Range<usize>,
-        buf: &mut [C32],
-        pol_stride: usize,
-    ) -> usize {
+    fn deposit_pulses_body(&self, block: &PulseBlock<'_>, buf: &mut [C32]) -> usize {
+        let PulseBlock {
+            sc,
+            track,
+            xp,
+            pol_stride,
+            ..
+        } = *block;
+        let range = block.range.clone();
         const CHUNK: usize = 64;
         let npol = sc.polarisations.len();
         let ns = self.window.samples;
