@@ -476,8 +476,10 @@ fn pass(
         for (t, r) in out.h.iter_mut().zip(hr) {
             *t += r as f64;
         }
-        for (t, r) in out.a.iter_mut().zip(ar) {
-            *t += r as f64;
+        if sandwich {
+            for (t, r) in out.a.iter_mut().zip(ar) {
+                *t += r as f64;
+            }
         }
         out.sf += sf as f64;
         out.sr += sr as f64;
@@ -652,7 +654,11 @@ pub fn refine(
     // information: σ²·H⁻¹ alone was overconfident by about 1.4× in variance wherever the
     // frame's texture is weak beside its noise (keyframe odometry, plains). A takes the
     // residual's true sensitivity from the reference's gradient instead, whose noise is
-    // independent of the frame's (docs/registration.md, Covariance).
+    // independent of the frame's (docs/registration.md, Covariance). Huber's weights enter
+    // A and H as IRLS weights w (a strict M-estimator would take ψ′, 0 beyond the threshold,
+    // in A and w²·e² in the meat): alike for the few samples clipped at 2× the RMS. An A
+    // with an exactly zero pivot (possible, where H was positive definite, on a reference
+    // without gradient under the frame) refuses the refinement as `Singular`.
     let hm = normal(&last, &warp).0;
     let mut am = SMatrix::<f64, 6, 6>::from_fn(|i, j| {
         if j < 4 {
@@ -827,14 +833,75 @@ mod tests {
         assert!(r.ncc_after > r.ncc_before && r.ncc_after > 0.99, "{r:?}");
     }
 
+    /// On a noise-free frame the sensitivity matrix A, built from the reference's gradient,
+    /// equals the Gauss–Newton matrix H built from the frame's, entry by entry: signs, the
+    /// warp's transpose and the block layout all have to be right for that (a sign or a
+    /// transposed M would only rotate the sandwich, which a NEES test cannot see).
+    #[test]
+    fn the_reference_sensitivity_matches_the_frame_jacobian() {
+        let bytes = tile_bytes(Some(&reference()));
+        let tile = Tile::parse(&bytes).unwrap();
+        let truth = similarity_at(30.0, 0.8, 40.0, 20.0);
+        let px = frame(&truth);
+        let img = SlopeImage::new_checked(&px, 60, 60, 16.0).unwrap();
+        // The warp of `truth` about the frame centre, as `refine` builds it.
+        let (sn, cs) = (libm::sin(30f64.to_radians()), libm::cos(30f64.to_radians()));
+        let (cx, cy) = truth.apply(29.5, 29.5);
+        let warp = Warp {
+            m: [[0.8 * cs, -0.8 * sn], [0.8 * sn, 0.8 * cs]],
+            t: [cx, cy],
+        };
+        let model = PassModel {
+            gain: 1.0,
+            offset: 0.0,
+            huber: f32::INFINITY,
+            sandwich: true,
+        };
+        let p = pass(
+            &img,
+            tile.slope_raster().unwrap(),
+            &warp,
+            (2, 1),
+            (29.5, 29.5),
+            &model,
+        );
+        assert!(p.n > 500, "{}", p.n);
+        let h = p.normal_matrix();
+        for i in 0..6 {
+            for j in 0..4 {
+                let (a, hij) = (p.a[i * 4 + j], h[(i, j)]);
+                let scale = libm::sqrt(h[(i, i)] * h[(j, j)]);
+                assert!(
+                    (a - hij).abs() <= 0.02 * scale,
+                    "A[{i}][{j}] = {a}, H = {hij} (scale {scale})"
+                );
+            }
+        }
+        // Without the flag nothing is summed.
+        let off = pass(
+            &img,
+            tile.slope_raster().unwrap(),
+            &warp,
+            (2, 1),
+            (29.5, 29.5),
+            &PassModel {
+                sandwich: false,
+                ..model
+            },
+        );
+        assert!(off.a.iter().all(|v| *v == 0.0));
+        assert_eq!(off.h, p.h);
+    }
+
     /// Over many noisy frames the refined centre scatters as its covariance says. The frame
     /// carries white slope noise of 1° per pixel against gradients of about 1° per pixel, so
     /// its central differences are noisy: σ²·H⁻¹ alone (before the sandwich) scored a mean
     /// NEES of 8.4 here, the sandwich 1.58 (a little conservative: the residuals' lag
-    /// correlation, clamped at 0 from below, inflates σ² by ~1.2 on white noise). The noisy H also shortens every Gauss–Newton step (by H_true/H, 0.4
-    /// here), so the default 0.03 px convergence test stops short of the fixed point and
-    /// leaves the estimate nearer its start; the test converges tightly to score the fixed
-    /// point, whose covariance the sandwich describes.
+    /// correlation, clamped at 0 from below, inflates σ² by ~1.2 on white noise). The noisy H
+    /// also shortens every Gauss–Newton step (by H_true/H, 0.4 here), so the default 0.03 px
+    /// convergence test stops short of the fixed point and leaves the estimate nearer its
+    /// start; the test converges tightly to score the fixed point, whose covariance the
+    /// sandwich describes.
     #[test]
     fn the_covariance_covers_a_noisy_frame() {
         let bytes = tile_bytes(Some(&reference()));
