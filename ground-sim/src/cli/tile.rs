@@ -6,10 +6,14 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use ground_sim::dem::read_geotiff;
+use ground_sim::evaluation::calibrate::calibrate;
+use ground_sim::evaluation::campaign::{CampaignSpec, PriorSpec};
+use ground_sim::flyer::frames::SensorModel;
+use ground_sim::flyer::onboard::Budget;
 use ground_sim::reference::noise_floor::FrameNoise;
 use ground_sim::reference::tile::MAX_TILE_FEATURES;
 use ground_sim::reference::{
-    DEFAULT_SMOOTHING_M, Smoothing, reference_dem, surf_config_for, write_reference,
+    DEFAULT_SMOOTHING_M, Smoothing, TILE_FILE, reference_dem, surf_config_for, write_reference_with,
 };
 
 /// Arguments of `ground-sim tile`.
@@ -47,6 +51,24 @@ pub struct Args {
     /// Most features kept (strongest first).
     #[arg(long, default_value_t = MAX_TILE_FEATURES)]
     pub max_features: usize,
+    /// Measure the tile's frame-wide error by flying this many simulated frames over the
+    /// source DEM with the flight navigator (a prior of 1 m, 1°, 2 % as the descent filter
+    /// gives), and write the extra σ that brings their fixes' mean NEES to 2 into the tile's
+    /// `reference_sigma_m` (`ground_sim::evaluation::calibrate`; 0 = off). An explicit option:
+    /// the frames come from the map's own DEM, so it measures how the flyer's frames fit this
+    /// map, not the map's error against the ground.
+    #[arg(long, default_value_t = 0)]
+    pub calibrate_frames: usize,
+    /// Smallest frame pixel of the calibration frames, metres (the descent's TRN frames: 5.3 m
+    /// at 2 km above the terrain).
+    #[arg(long, default_value_t = 5.0)]
+    pub calibrate_pixel_min_m: f64,
+    /// Largest frame pixel of the calibration frames, metres (10 m at the 3.8 km release).
+    #[arg(long, default_value_t = 10.5)]
+    pub calibrate_pixel_max_m: f64,
+    /// Seed of the calibration frames.
+    #[arg(long, default_value_t = 1)]
+    pub calibrate_seed: u64,
     /// Also write the summary JSON here.
     #[arg(long)]
     pub json: Option<PathBuf>,
@@ -68,16 +90,57 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         }
         cfg.detector.threshold = t;
     }
-    let s = write_reference(
-        &r,
-        &a.out,
-        &cfg,
-        a.max_features.min(MAX_TILE_FEATURES),
-        Smoothing {
-            target_m: a.smoothing_m,
-            inherent_m: a.inherent_smoothing_m,
-        },
-    )?;
+    let smoothing = Smoothing {
+        target_m: a.smoothing_m,
+        inherent_m: a.inherent_smoothing_m,
+    };
+    let max_features = a.max_features.min(MAX_TILE_FEATURES);
+    let mut s = write_reference_with(&r, &a.out, &cfg, max_features, smoothing, 0.0)?;
+    let mut calibration = None;
+    if a.calibrate_frames > 0 {
+        let spec = CampaignSpec {
+            trials: a.calibrate_frames,
+            seed: a.calibrate_seed,
+            pixel_min_m: a.calibrate_pixel_min_m,
+            pixel_max_m: a.calibrate_pixel_max_m,
+            sensor: SensorModel::default(),
+            prior: Some(PriorSpec {
+                sigma_m: 1.0,
+                heading_sigma_deg: 1.0,
+                scale_sigma: 0.02,
+            }),
+            budget: Budget::Flight,
+            host_time: false,
+        };
+        let bytes = std::fs::read(a.out.join(TILE_FILE))
+            .with_context(|| format!("reading {}", a.out.join(TILE_FILE).display()))?;
+        let tile = nav_core::Tile::parse(&bytes).map_err(|e| anyhow::anyhow!("{e}"))?;
+        let pb = super::progress(a.calibrate_frames as u64, "calibrate");
+        let c = calibrate(tile, &dem, &spec, &pb)?;
+        pb.finish_and_clear();
+        println!(
+            "calibration {} fixes of {} frames at {}–{} m: mean NEES {:.2}; frame-wide σ {:.3} m \
+             (mean NEES with it {:.2})",
+            c.fixes,
+            c.frames,
+            a.calibrate_pixel_min_m,
+            a.calibrate_pixel_max_m,
+            c.nees_before,
+            c.frame_wide_sigma_m,
+            c.nees_after
+        );
+        if c.frame_wide_sigma_m > 0.0 {
+            s = write_reference_with(
+                &r,
+                &a.out,
+                &cfg,
+                max_features,
+                smoothing,
+                c.frame_wide_sigma_m,
+            )?;
+        }
+        calibration = Some(c);
+    }
     println!(
         "reference  {}x{} px at {} m, smoothing σ {} m, threshold {:.3e} deg²: {} features, {} bytes -> {}",
         s.width_px,
@@ -90,7 +153,12 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         a.out.display()
     );
     if let Some(j) = &a.json {
-        super::write_json(j, &s)?;
+        // The summary's fields, plus the calibration (null when not run).
+        let mut v = serde_json::to_value(&s)?;
+        if let Some(o) = v.as_object_mut() {
+            o.insert("calibration".into(), serde_json::to_value(calibration)?);
+        }
+        super::write_json(j, &v)?;
     }
     Ok(())
 }

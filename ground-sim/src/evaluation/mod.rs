@@ -1,6 +1,7 @@
 //! The flight code scored against the truth: one frame ([`trn`]), one image pair
 //! ([`register`]) and closed-loop hops ([`descent`]).
 
+pub mod calibrate;
 pub mod campaign;
 pub mod descent;
 pub mod navmap;

@@ -50,7 +50,11 @@ pub struct TileSummary {
     pub smoothing_m: f64,
     /// The map's own horizontal error the tile claims, 1σ per axis (x, y), metres.
     pub reference_sigma_m: [f32; 2],
-    /// Of which applied by the tile builder, metres (the rest the DEM already had).
+    /// Of it, the frame-wide error measured by flying frames over the map (`tile
+    /// --calibrate-frames`), 1σ per axis, metres; 0 when not calibrated.
+    pub frame_wide_sigma_m: f64,
+    /// Of the terrain smoothing, the σ applied by the tile builder, metres (the rest the DEM
+    /// already had).
     pub smoothing_applied_m: f64,
 }
 
@@ -262,6 +266,23 @@ pub fn write_reference(
     max_features: usize,
     smoothing: Smoothing,
 ) -> Result<TileSummary> {
+    write_reference_with(ref_dem, dir, cfg, max_features, smoothing, 0.0)
+}
+
+/// [`write_reference`] with a frame-wide error of `frame_wide_m` metres (1σ per axis) measured
+/// by flying frames over the map (`evaluation::calibrate`), added in quadrature to the blur
+/// term of [`reference_sigma_m`] in the tile's `reference_sigma_m`.
+pub fn write_reference_with(
+    ref_dem: &Dem,
+    dir: &Path,
+    cfg: &SurfConfig,
+    max_features: usize,
+    smoothing: Smoothing,
+    frame_wide_m: f64,
+) -> Result<TileSummary> {
+    if !(frame_wide_m.is_finite() && frame_wide_m >= 0.0) {
+        anyhow::bail!("the frame-wide error must be finite and >= 0, got {frame_wide_m}");
+    }
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let px = reference_slope_px(ref_dem, smoothing.applied_m())?;
     let slope = Dem::new(
@@ -291,7 +312,8 @@ pub fn write_reference(
             .take(nav_core::tile::MAX_PROJECTION_LEN)
             .collect(),
     };
-    let ref_sigma = reference_sigma_m(smoothing.inherent_m);
+    let ref_sigma =
+        reference_sigma_m(smoothing.inherent_m).map(|b| (b as f64).hypot(frame_wide_m) as f32);
     let bytes = build_tile(
         &img,
         &grid,
@@ -316,6 +338,7 @@ pub fn write_reference(
         octaves: cfg.detector.octaves,
         smoothing_m: smoothing.target_m,
         reference_sigma_m: ref_sigma,
+        frame_wide_sigma_m: frame_wide_m,
         smoothing_applied_m: smoothing.applied_m(),
     };
     std::fs::write(
