@@ -300,50 +300,53 @@ fn deg(p: SlopePx) -> Option<f32> {
     slope_is_valid(p).then(|| p.to_bits() as f32 * SLOPE_LSB_DEG)
 }
 
+/// The bilinear patch of the reference at tile pixel `(x, y)`: its four corners (degrees; top
+/// left, top right, bottom left, bottom right) and the fractional position in it. `None`
+/// unless all four are valid.
+#[inline]
+fn patch(r: &SlopeRaster<'_>, x: f32, y: f32) -> Option<([f32; 4], f32, f32)> {
+    if !(x >= 0.0 && y >= 0.0) {
+        return None;
+    }
+    let (x0, y0) = (libm::floorf(x), libm::floorf(y));
+    let (c, row) = (x0 as usize, y0 as usize);
+    if c + 1 >= r.width() || row + 1 >= r.height() {
+        return None;
+    }
+    let corners = [
+        deg(r.get(c, row))?,
+        deg(r.get(c + 1, row))?,
+        deg(r.get(c, row + 1))?,
+        deg(r.get(c + 1, row + 1))?,
+    ];
+    Some((corners, x - x0, y - y0))
+}
+
+/// Value of a [`patch`] at `(fx, fy)`, degrees.
+#[inline]
+fn patch_value([a, b, c, d]: [f32; 4], fx: f32, fy: f32) -> f32 {
+    let top = a + fx * (b - a);
+    let bot = c + fx * (d - c);
+    top + fy * (bot - top)
+}
+
 /// Bilinear reference slope at tile pixel `(x, y)`, degrees; `None` unless all four
 /// neighbours are valid.
 #[inline]
 fn bilinear(r: &SlopeRaster<'_>, x: f32, y: f32) -> Option<f32> {
-    if !(x >= 0.0 && y >= 0.0) {
-        return None;
-    }
-    let (x0, y0) = (libm::floorf(x), libm::floorf(y));
-    let (c, row) = (x0 as usize, y0 as usize);
-    if c + 1 >= r.width() || row + 1 >= r.height() {
-        return None;
-    }
-    let (fx, fy) = (x - x0, y - y0);
-    let a = deg(r.get(c, row))?;
-    let b = deg(r.get(c + 1, row))?;
-    let cc = deg(r.get(c, row + 1))?;
-    let d = deg(r.get(c + 1, row + 1))?;
-    let top = a + fx * (b - a);
-    let bot = cc + fx * (d - cc);
-    Some(top + fy * (bot - top))
+    let (k, fx, fy) = patch(r, x, y)?;
+    Some(patch_value(k, fx, fy))
 }
 
 /// [`bilinear`] with the bilinear patch's gradient: `(R, ∂R/∂X, ∂R/∂Y)`, degrees per tile
-/// pixel. The value is computed exactly as [`bilinear`] computes it (same bits).
+/// pixel (the value has the same bits as [`bilinear`]'s).
 #[inline]
 fn bilinear_grad(r: &SlopeRaster<'_>, x: f32, y: f32) -> Option<(f32, f32, f32)> {
-    if !(x >= 0.0 && y >= 0.0) {
-        return None;
-    }
-    let (x0, y0) = (libm::floorf(x), libm::floorf(y));
-    let (c, row) = (x0 as usize, y0 as usize);
-    if c + 1 >= r.width() || row + 1 >= r.height() {
-        return None;
-    }
-    let (fx, fy) = (x - x0, y - y0);
-    let a = deg(r.get(c, row))?;
-    let b = deg(r.get(c + 1, row))?;
-    let cc = deg(r.get(c, row + 1))?;
-    let d = deg(r.get(c + 1, row + 1))?;
-    let top = a + fx * (b - a);
-    let bot = cc + fx * (d - cc);
-    let gx = (b - a) + fy * ((d - cc) - (b - a));
-    let gy = (cc - a) + fx * ((d - b) - (cc - a));
-    Some((top + fy * (bot - top), gx, gy))
+    let (k, fx, fy) = patch(r, x, y)?;
+    let [a, b, c, d] = k;
+    let gx = (b - a) + fy * ((d - c) - (b - a));
+    let gy = (c - a) + fx * ((d - b) - (c - a));
+    Some((patch_value(k, fx, fy), gx, gy))
 }
 
 /// Sample grid stride: the smallest with at most `budget` samples over `w × h` interior pixels.
