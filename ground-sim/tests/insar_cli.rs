@@ -59,6 +59,15 @@ fn insar_folder_works_with_trn_and_eval() {
         assert!(report.get(k).is_some_and(|v| v.is_number()), "no {k}");
     }
     assert!(report["height_rmse_m"].as_f64().unwrap() < 5.0);
+    // The default radar is the mission design: thermal noise at −25 dB, 32 m, both looks.
+    let sar_cfg = &report["sar"]["config"];
+    assert_eq!(sar_cfg["noise_equivalent_sigma0_db"], -25.0, "{sar_cfg}");
+    assert_eq!(sar_cfg["baseline_m"], 32.0, "{sar_cfg}");
+    assert_eq!(sar_cfg["diffuse_sigma0_db"], -17.0, "{sar_cfg}");
+    assert!(
+        report["looks"]["both_valid"].as_f64().unwrap() > 0.5,
+        "{report}"
+    );
     for f in [
         "tile.bin",
         "slope.tif",
@@ -95,7 +104,8 @@ fn insar_folder_works_with_trn_and_eval() {
     ]);
     assert!(json.exists());
 
-    // SLCs from `sar` give the same product as simulating inside.
+    // SLCs from `sar` (one pass, the same default radar and noise) give the same product as
+    // simulating that pass inside.
     let sar = dir.path().join("sar");
     run(&[
         "sar",
@@ -105,10 +115,19 @@ fn insar_folder_works_with_trn_and_eval() {
         path(&sar),
         "--pol",
         "HH",
-        "--no-noise",
         "--no-progress",
     ]);
-    let ins2 = dir.path().join("insar2");
+    let (ins1, ins2) = (dir.path().join("insar1"), dir.path().join("insar2"));
+    run(&[
+        "insar",
+        "--dem",
+        path(&dem),
+        "--looks",
+        "one",
+        "--out",
+        path(&ins1),
+        "--no-progress",
+    ]);
     run(&[
         "insar",
         "--dem",
@@ -118,11 +137,14 @@ fn insar_folder_works_with_trn_and_eval() {
         "--out",
         path(&ins2),
     ]);
-    let r2: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(ins2.join("report.json")).unwrap()).unwrap();
+    let read = |d: &Path| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(d.join("report.json")).unwrap()).unwrap()
+    };
+    let (r1, r2) = (read(&ins1), read(&ins2));
     let (a, b) = (
-        report["height_rmse_m"].as_f64().unwrap(),
+        r1["height_rmse_m"].as_f64().unwrap(),
         r2["height_rmse_m"].as_f64().unwrap(),
     );
     assert!((a - b).abs() < 1e-6, "{a} vs {b}");
+    assert!(r2["looks"].is_null(), "one pass of SLCs is one look: {r2}");
 }

@@ -48,20 +48,24 @@ pub struct Args {
     /// Heading of the TRN frame: its +x axis, clockwise from east, degrees.
     #[arg(long, default_value_t = 0.0)]
     pub heading_deg: f64,
-    /// Radar design (default `paper`: 8 m baseline; `mission`: 32 m).
+    /// Radar design (default `mission`: 32 m baseline, NESZ −25 dB, the Moon's diffuse echo,
+    /// both looks; `paper`: the paper's noise-free model, 8 m, one look).
     #[arg(long, value_enum)]
     pub radar: Option<RadarPreset>,
-    /// Thermal noise of the radar, NESZ in dB (default: none, the paper's echo model).
-    #[arg(long, allow_hyphen_values = true)]
+    /// Thermal noise of the radar, NESZ in dB (default: the design's, −25 dB for `mission`).
+    #[arg(long, allow_hyphen_values = true, conflicts_with = "no_noise")]
     pub nesz_db: Option<f64>,
-    /// Diffuse surface backscatter at normal incidence, dB (default: none, the paper's
-    /// two-scale surface; docs/insar.md, "Walls under noise", derives −17 dB).
+    /// No thermal noise (the paper's echo model).
+    #[arg(long)]
+    pub no_noise: bool,
+    /// Diffuse surface backscatter at normal incidence, dB (default: the design's, −17 dB for
+    /// `mission`, none for `paper`; docs/insar.md, "Walls under noise").
     #[arg(long, allow_hyphen_values = true)]
     pub diffuse_db: Option<f64>,
     /// Look directions: `one` (east, as the paper) or `both` (a second, west-looking pass
-    /// fused in; twice the SAR time).
-    #[arg(long, value_enum, default_value_t = LookDirections::One)]
-    pub looks: LookDirections,
+    /// fused in; twice the SAR time). Default: the design's (`mission` both, `paper` one).
+    #[arg(long, value_enum)]
+    pub looks: Option<LookDirections>,
     /// Hide progress bars.
     #[arg(long)]
     pub no_progress: bool,
@@ -134,9 +138,11 @@ pub fn run_demo(a: &Args) -> anyhow::Result<DemoSummary> {
     let radar = RadarArgs {
         radar: a.radar,
         nesz_db: a.nesz_db,
+        no_noise: a.no_noise,
         diffuse_db: a.diffuse_db,
         ..RadarArgs::default()
     };
+    let looks = super::insar::looks_or_preset(a.looks, &radar);
     let (sar_cfg, pol) = super::insar::radar_config(&radar)?;
     let (sdem, filled) = SarDem::from_dem(&truth)?;
     let opts = SimOptions {
@@ -148,14 +154,20 @@ pub fn run_demo(a: &Args) -> anyhow::Result<DemoSummary> {
     let sar_report = write_products(&pair, [sdem.width, sdem.height], sdem.pixel_m, &sar_dir)?;
     let slc = &pair.slcs[0];
     steps.push(DemoStep {
-        step: "SAR (A1+A2, HH, RDA)".into(),
+        step: format!("SAR (A1+A2, HH, RDA; radar {})", radar.preset().name()),
         result: format!(
-            "{} facets, SLC {}x{}, NESZ {}, echoes {:.1} s",
+            "baseline {} m, {} facets, SLC {}x{}, NESZ {}, diffuse {}, echoes {:.1} s",
+            sar_cfg.baseline_m,
             pair.stats.facets,
             slc.lines,
             slc.gates,
             if sar_cfg.noise_sigma0_linear().is_some() {
                 format!("{} dB", sar_cfg.noise_equivalent_sigma0_db)
+            } else {
+                "none".into()
+            },
+            if sar_cfg.diffuse_sigma0_db.is_finite() {
+                format!("{} dB", sar_cfg.diffuse_sigma0_db)
             } else {
                 "none".into()
             },
@@ -169,7 +181,7 @@ pub fn run_demo(a: &Args) -> anyhow::Result<DemoSummary> {
     let t0 = Instant::now();
     let cfg = InsarConfig::default().with_radar(&sar_cfg);
     let (truth_grid, mut product) = process_simulated(&truth, &pair, pol, &cfg)?;
-    if a.looks == LookDirections::Both {
+    if looks == LookDirections::Both {
         // The west-looking pass: the same radar over the mirrored scene, fused cell by cell.
         let west = run_from_dem(&mirrored_dem(&truth)?, &sar_cfg, pol, &cfg, !a.no_progress)?;
         fuse_looks(&mut product, &west.product)?;
@@ -184,7 +196,7 @@ pub fn run_demo(a: &Args) -> anyhow::Result<DemoSummary> {
     let insar = write_outputs(&insar_dir, &product, &truth_grid, &ctx)?;
     let acc = &insar.accuracy;
     steps.push(DemoStep {
-        step: match a.looks {
+        step: match looks {
             LookDirections::One => "InSAR DEM (20 m)".into(),
             LookDirections::Both => "InSAR DEM (20 m, both looks)".into(),
         },

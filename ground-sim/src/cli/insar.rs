@@ -50,15 +50,16 @@ pub struct Args {
     /// Use the flat-removed phase wrapped (no unwrapping).
     #[arg(long)]
     pub no_unwrap: bool,
-    /// Radar parameters (the first `--pol` is the InSAR channel, default HH; `--radar mission`
-    /// for the 32 m baseline). Thermal noise is off unless `--nesz-db` is given (the paper's
-    /// echo model).
+    /// Radar parameters (the first `--pol` is the InSAR channel, default HH). The default is
+    /// the mission design with thermal noise at NESZ −25 dB; `--radar paper` (or `--no-noise`)
+    /// gives the paper's noise-free echo model.
     #[command(flatten)]
     pub radar: RadarArgs,
     /// Look directions: `one` (east, as the paper) or `both` (a second, west-looking pass over
-    /// the same scene, fused cell by cell by validity and CRLB; twice the SAR time).
-    #[arg(long, value_enum, default_value_t = LookDirections::One)]
-    pub looks: LookDirections,
+    /// the same scene, fused cell by cell by validity and CRLB; twice the SAR time). Default:
+    /// the radar preset's (`mission` both, `paper` one); one with `--slc-dir`.
+    #[arg(long, value_enum)]
+    pub looks: Option<LookDirections>,
     /// Hide progress bars.
     #[arg(long)]
     pub no_progress: bool,
@@ -84,18 +85,32 @@ pub struct Args {
     pub plan_blocks: bool,
 }
 
-/// The radar configuration of an InSAR run: `RadarArgs` resolved as for `sar`, but only the
-/// InSAR channel (first `--pol`, default HH) and **no thermal noise unless `--nesz-db` is
-/// given** — the paper's echo model (eqs 11–13) has none. Noise stays opt-in because no radar
-/// here yet gives a tile TRN navigates reliably at NESZ −25 dB (docs/insar.md).
+/// The radar configuration of an InSAR run: `RadarArgs` resolved as for `sar` (thermal noise
+/// as the preset says: on at −25 dB for the default mission design), but only the InSAR
+/// channel (first `--pol`, default HH).
 pub fn radar_config(r: &RadarArgs) -> anyhow::Result<(ground_sim::sar::SarConfig, Polarisation)> {
     let mut sar = r.resolve()?;
     let pol = r.pol.first().copied().unwrap_or(Polarisation::HH);
     sar.polarisations = vec![pol];
-    if r.nesz_db.is_none() {
-        sar.noise_equivalent_sigma0_db = f64::NEG_INFINITY;
-    }
     Ok((sar, pol))
+}
+
+/// The look directions a command flies: `--looks` when given, else the radar preset's
+/// ([`LookDirections::of_preset`]).
+pub fn looks_or_preset(looks: Option<LookDirections>, r: &RadarArgs) -> LookDirections {
+    looks.unwrap_or_else(|| LookDirections::of_preset(r.preset()))
+}
+
+impl Args {
+    /// This run's look directions: `--looks`, else one pass when `--slc-dir` brings one pass's
+    /// SLCs, else the radar preset's.
+    pub fn looks(&self) -> LookDirections {
+        match (self.looks, &self.slc_dir) {
+            (Some(l), _) => l,
+            (None, Some(_)) => LookDirections::One,
+            (None, None) => looks_or_preset(None, &self.radar),
+        }
+    }
 }
 
 /// What an `insar` run made.
@@ -139,7 +154,7 @@ pub fn run_chain(a: &Args) -> anyhow::Result<Outcome> {
             layout,
             out: &a.out,
             progress: !a.no_progress,
-            looks: a.looks,
+            looks: a.looks(),
         };
         return run_blocks(a, &job, ctx);
     }
@@ -149,13 +164,13 @@ pub fn run_chain(a: &Args) -> anyhow::Result<Outcome> {
         a.block_cells
     );
     let (truth, product) = match &a.slc_dir {
-        Some(_) if a.looks == LookDirections::Both => {
+        Some(_) if a.looks() == LookDirections::Both => {
             anyhow::bail!(
                 "--looks both simulates both passes itself; --slc-dir holds one pass (drop one of them)"
             )
         }
-        None if a.looks == LookDirections::Both => {
-            let run = run_from_dem_looks(&truth, &sar, pol, &cfg, !a.no_progress, a.looks)?;
+        None if a.looks() == LookDirections::Both => {
+            let run = run_from_dem_looks(&truth, &sar, pol, &cfg, !a.no_progress, a.looks())?;
             ctx.filled_nodata = run.filled_nodata;
             ctx.sar = Some(SarSummary::of(&run.pair));
             (run.truth, run.product)

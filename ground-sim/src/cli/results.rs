@@ -118,7 +118,7 @@ fn suite_section(
     writeln!(
         md,
         "Every scene 4 km × 4 km at 5 m (terrain seed {seed}; `terrain --preset NAME --window W --seed {seed}`), \
-         tiles at 20 m from the truth DEM and from the InSAR chain (the paper's radar, noise-free echo model), \
+         tiles at 20 m from the truth DEM and from the InSAR chain (the default radar, as the line above the table states), \
          frames 200 px at 9–11 m with any heading, without and with a prior (σ 50 m, heading σ 2°, scale σ 2 %, drawn around the truth). \
          \"navmap go\" scores the navigability map (`ground-sim navmap`, from the tile alone): the success rate of the frames it \
          called \"go\" and the fraction of frames whose outcome it predicted. The whole suite took {:.0} s on this 2-core machine.\n",
@@ -157,7 +157,7 @@ fn suite_section(
         md,
         "### The same suite with terrain and campaign seed {seed2}\n\nSuccess per scene (false fixes in brackets when any), {trials} frames per campaign:\n"
     )?;
-    let cols: Vec<(&str, bool)> = vec![
+    let all_cols = [
         ("truth", false),
         ("truth", true),
         ("insar", false),
@@ -167,34 +167,40 @@ fn suite_section(
         md,
         "| scene | truth, no prior | truth, prior | InSAR, no prior | InSAR, prior |\n|---|---|---|---|---|"
     )?;
-    let rows = report2["rows"].as_array().cloned().unwrap_or_default();
-    for sc in report2["scenes"].as_array().into_iter().flatten() {
-        let name = sc["scene"]["name"].as_str().unwrap_or("?");
-        let cells: Vec<String> = cols
-            .iter()
-            .map(|&(kind, prior)| {
-                rows.iter()
-                    .find(|r| {
-                        r["scene"] == name
-                            && r["kind"] == kind
-                            && r["summary"]["prior"].is_null() != prior
-                    })
-                    .map_or("–".into(), |r| {
-                        let f = r["summary"]["false_fixes"].as_u64().unwrap_or(0);
-                        format!(
-                            "{:.1} %{}",
-                            100.0 * r["summary"]["success_rate"].as_f64().unwrap_or(f64::NAN),
-                            if f > 0 {
-                                format!(" ({f} false)")
-                            } else {
-                                String::new()
-                            }
-                        )
-                    })
-            })
-            .collect();
-        writeln!(md, "| {name} | {} |", cells.join(" | "))?;
-    }
+    md.push_str(&success_rows(&report2, &all_cols));
+    // The paper's noise-free radar beside the default one: what thermal noise costs.
+    let dir_paper = a.work.join("suite-paper-radar");
+    go(&[
+        "suite",
+        "--out",
+        &dir_paper.to_string_lossy(),
+        "--campaign-seed",
+        &seed,
+        "--terrain-seed",
+        &seed,
+        "--trials",
+        &trials,
+        "--kinds",
+        "insar",
+        "--radar",
+        "paper",
+    ])?;
+    let report_paper = read(&dir_paper.join("suite.json"))?;
+    writeln!(
+        md,
+        "\n### InSAR tiles from the paper's noise-free radar (`suite --radar paper`, seed {seed})\n\nThe same scenes and frames as the first table, tiles from {}; success per scene (false fixes in brackets when any), {trials} frames per campaign:\n",
+        report_paper["spec"]["radar"]["baseline_m"].as_f64().map_or(
+            "the paper's radar".into(),
+            |b| format!(
+                "the paper's radar ({b} m baseline, no thermal noise, no diffuse echo, one look)"
+            )
+        )
+    )?;
+    writeln!(
+        md,
+        "| scene | InSAR, no prior | InSAR, prior |\n|---|---|---|"
+    )?;
+    md.push_str(&success_rows(&report_paper, &all_cols[2..]));
     writeln!(
         md,
         "\nThe navigability map over all campaigns of each seed (frames called \"go\": how many, how many got a correct fix; agreement = outcomes predicted right):\n\n| seed | tile | go frames | go success | agreement |\n|---|---|---|---|---|"
@@ -225,6 +231,41 @@ fn suite_section(
     }
     writeln!(md)?;
     Ok(())
+}
+
+/// One Markdown row per scene of a `suite.json`: the success rate of each (tile kind, prior)
+/// column, false fixes in brackets when any, "–" where the suite did not fly that campaign.
+fn success_rows(report: &Value, cols: &[(&str, bool)]) -> String {
+    let rows = report["rows"].as_array().cloned().unwrap_or_default();
+    let mut md = String::new();
+    for sc in report["scenes"].as_array().into_iter().flatten() {
+        let name = sc["scene"]["name"].as_str().unwrap_or("?");
+        let cells: Vec<String> = cols
+            .iter()
+            .map(|&(kind, prior)| {
+                rows.iter()
+                    .find(|r| {
+                        r["scene"] == name
+                            && r["kind"] == kind
+                            && r["summary"]["prior"].is_null() != prior
+                    })
+                    .map_or("–".into(), |r| {
+                        let f = r["summary"]["false_fixes"].as_u64().unwrap_or(0);
+                        format!(
+                            "{:.1} %{}",
+                            100.0 * r["summary"]["success_rate"].as_f64().unwrap_or(f64::NAN),
+                            if f > 0 {
+                                format!(" ({f} false)")
+                            } else {
+                                String::new()
+                            }
+                        )
+                    })
+            })
+            .collect();
+        md += &format!("| {name} | {} |\n", cells.join(" | "));
+    }
+    md
 }
 
 fn read(p: &Path) -> anyhow::Result<Value> {
@@ -585,7 +626,7 @@ pub fn run(a: &Args, dispatch: &dyn Fn(&[String]) -> anyhow::Result<()>) -> anyh
 }
 
 /// The paper's setting: reference tiles from the simulated single-pass InSAR of each preset
-/// (`ground-sim insar`, radar without thermal noise as the paper's echo model), the Fig. 7 cases
+/// (`ground-sim insar` with the default radar, the noisy mission design), the Fig. 7 cases
 /// and an `eval` campaign against them.
 fn insar_section(
     md: &mut String,
@@ -598,7 +639,11 @@ fn insar_section(
     writeln!(md, "\n## Against the InSAR reference (the product)\n")?;
     writeln!(
         md,
-        "Each preset through `ground-sim insar` (SAR echoes, focusing, interferogram, DEM at 20 m, tile with 50 m terrain smoothing (`ground_sim::reference::INSAR_SMOOTHING_M`) and the detector threshold of every tile, twice the sensor's noise floor (`ground_sim::reference::noise_floor`); radar without thermal noise, the paper's echo model), then the Fig. 7 frames and an `eval` campaign (same seed and frames as above) against that tile. Frames still come from the truth DEM, as the flyer's sensor sees the real terrain.\n"
+        "Each preset through `ground-sim insar` (SAR echoes, focusing, interferogram, DEM at 20 m, tile with 50 m terrain smoothing (`ground_sim::reference::INSAR_SMOOTHING_M`) and the detector threshold of every tile, twice the sensor's noise floor (`ground_sim::reference::noise_floor`); the default radar: {}, radar seed {seed}), then the Fig. 7 frames and an `eval` campaign (same seed and frames as above) against that tile. Frames still come from the truth DEM, as the flyer's sensor sees the real terrain. The paper's noise-free radar (`--radar paper`) is flown over the suite's scenes in the suite section.\n",
+        ground_sim::evaluation::suite::radar_words(
+            &ground_sim::sar::RadarPreset::default().config(),
+            ground_sim::insar::pipeline::LookDirections::of_preset(Default::default()),
+        )
     )?;
     let mut dem_rows = String::new();
     let mut case_rows = String::new();

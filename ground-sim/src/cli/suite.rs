@@ -54,12 +54,14 @@ pub struct Args {
     /// Folder of real DEMs that join the suite when present.
     #[arg(long, default_value = SHARED_DATA_DIR)]
     pub shared: PathBuf,
-    /// Radar of the InSAR tiles (as `insar`: noise off unless `--nesz-db`).
+    /// Radar of the InSAR tiles (as `insar`: the mission design at NESZ −25 dB unless told
+    /// otherwise; `--radar paper` for the paper's noise-free model).
     #[command(flatten)]
     pub radar: RadarArgs,
     /// Look directions of the InSAR tiles (`both`: a second, west-looking pass fused in).
-    #[arg(long, value_enum, default_value_t = ground_sim::insar::pipeline::LookDirections::One)]
-    pub looks: ground_sim::insar::pipeline::LookDirections,
+    /// Default: the radar preset's (`mission` both, `paper` one).
+    #[arg(long, value_enum)]
+    pub looks: Option<ground_sim::insar::pipeline::LookDirections>,
     /// The navigator budget.
     #[command(flatten)]
     pub budget: super::BudgetArgs,
@@ -117,7 +119,7 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         reference_pixel_m: 20.0,
         radar,
         polarisation,
-        looks: a.looks,
+        looks: super::insar::looks_or_preset(a.looks, &a.radar),
         navmap: NavmapThresholds::default(),
         budget: a.budget.budget,
     };

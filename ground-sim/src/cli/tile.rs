@@ -48,6 +48,11 @@ pub struct Args {
     /// `insar`'s defaults); only the remainder is applied.
     #[arg(long, default_value_t = 0.0)]
     pub inherent_smoothing_m: f64,
+    /// Share of the DEM's valid cells made by one look direction alone, 0–1 (an InSAR DEM fused
+    /// from two opposite looks: its `report.json` → `looks`; 1 = one look or unknown). Scales
+    /// the blur term of the tile's reference error (`ground_sim::reference::reference_sigma_m`).
+    #[arg(long, default_value_t = 1.0)]
+    pub one_look_share: f64,
     /// Most features kept (strongest first).
     #[arg(long, default_value_t = MAX_TILE_FEATURES)]
     pub max_features: usize,
@@ -93,7 +98,14 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
     let smoothing = Smoothing {
         target_m: a.smoothing_m,
         inherent_m: a.inherent_smoothing_m,
+        one_look_share: a.one_look_share,
     };
+    if !(0.0..=1.0).contains(&a.one_look_share) {
+        anyhow::bail!(
+            "--one-look-share must be in [0, 1], got {}",
+            a.one_look_share
+        );
+    }
     let max_features = a.max_features.min(MAX_TILE_FEATURES);
     let mut s = write_reference_with(&r, &a.out, &cfg, max_features, smoothing, 0.0)?;
     let mut calibration = None;

@@ -33,9 +33,10 @@ pub struct Args {
     /// Look directions.
     #[arg(long, value_enum, value_delimiter = ',', default_values_t = [LookDirections::One, LookDirections::Both])]
     pub looks: Vec<LookDirections>,
-    /// Diffuse surface backscatter at normal incidence, dB, for every point (`-inf`: none, the
-    /// paper's two-scale surface; docs/insar.md, "Walls under noise").
-    #[arg(long, allow_hyphen_values = true, default_value_t = f64::NEG_INFINITY)]
+    /// Diffuse surface backscatter at normal incidence, dB, for every point (default the
+    /// Moon's, as the default mission radar flies; `-inf`: none, the paper's two-scale
+    /// surface; docs/insar.md, "Walls under noise").
+    #[arg(long, allow_hyphen_values = true, default_value_t = ground_sim::sar::MOON_DIFFUSE_DB)]
     pub diffuse_db: f64,
     /// Frames per TRN campaign.
     #[arg(long, default_value_t = 100)]

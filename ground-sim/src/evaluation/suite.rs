@@ -488,24 +488,39 @@ pub fn navmap_picture(m: &NavMap, slope_deg: &[f32]) -> RgbImage {
     img
 }
 
-/// The suite's table as Markdown: one row per campaign.
-pub fn table_markdown(r: &SuiteReport) -> String {
-    let noise = r.spec.radar.noise_equivalent_sigma0_db;
-    let mut s = format!(
-        "{} frames per campaign, campaign seed {}, navigator budget {}; InSAR tiles: {} m baseline, {}, {}.\n\n",
-        r.spec.trials,
-        r.spec.seed,
-        r.spec.budget.label(),
-        r.spec.radar.baseline_m,
+/// A radar design in words for tables and reports: baseline, thermal noise, diffuse echo and
+/// look directions (e.g. "32 m baseline, NESZ -25 dB, diffuse echo -17 dB, both looks fused").
+pub fn radar_words(radar: &SarConfig, looks: LookDirections) -> String {
+    let noise = radar.noise_equivalent_sigma0_db;
+    let diffuse = radar.diffuse_sigma0_db;
+    format!(
+        "{} m baseline, {}, {}, {}",
+        radar.baseline_m,
         if noise.is_finite() {
             format!("NESZ {noise} dB")
         } else {
             "no thermal noise".to_string()
         },
-        match r.spec.looks {
+        if diffuse.is_finite() {
+            format!("diffuse echo {diffuse} dB")
+        } else {
+            "no diffuse echo".to_string()
+        },
+        match looks {
             LookDirections::One => "one look (east)",
             LookDirections::Both => "both looks fused",
         }
+    )
+}
+
+/// The suite's table as Markdown: one row per campaign.
+pub fn table_markdown(r: &SuiteReport) -> String {
+    let mut s = format!(
+        "{} frames per campaign, campaign seed {}, navigator budget {}; InSAR tiles: {}.\n\n",
+        r.spec.trials,
+        r.spec.seed,
+        r.spec.budget.label(),
+        radar_words(&r.spec.radar, r.spec.looks),
     );
     s += concat!(
         "| scene | tile | prior | success | false | no fix (reasons) | pos p50 / p95 m | heading p95 ° | in 3σ | NEES | ms/frame | navmap go: success / agree |\n",

@@ -246,18 +246,28 @@ pub struct InsarProduct {
     pub look_fusion: Option<LookFusion>,
 }
 
-/// Look directions of an InSAR map.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, clap::ValueEnum)]
+/// Look directions of an InSAR map (the commands' default is the radar preset's,
+/// [`LookDirections::of_preset`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, clap::ValueEnum)]
 #[serde(rename_all = "lowercase")]
 pub enum LookDirections {
     /// One pass, the radar looking east (towards +columns), as the paper.
-    #[default]
     One,
     /// A second pass looking west, fused with the first cell by cell.
     Both,
 }
 
 impl LookDirections {
+    /// The look directions a radar design flies: the paper one pass, the mission two (east and
+    /// west: the second look is what takes lost-in-space TRN on the noisy floors to ≥ 99 %,
+    /// docs/insar.md, "Walls under noise").
+    pub fn of_preset(preset: crate::sar::RadarPreset) -> Self {
+        match preset {
+            crate::sar::RadarPreset::Paper => LookDirections::One,
+            crate::sar::RadarPreset::Mission => LookDirections::Both,
+        }
+    }
+
     /// The name the CLI and the JSON use (`one`, `both`).
     pub fn name(self) -> &'static str {
         match self {
@@ -288,6 +298,17 @@ pub struct LookFusion {
     /// shifted (each block's own shift is in the report's `blocks.per_block`).
     #[serde(default)]
     pub west_cycles_shifted: i64,
+}
+
+impl LookFusion {
+    /// Share of the fused map's valid cells made by one look alone, 0–1 (1 when no cell is
+    /// valid): the cells whose range-direction shift the second look did not cancel
+    /// (`reference::reference_sigma_m`).
+    pub fn one_look_share(&self) -> f64 {
+        let one = self.east_only + self.west_only;
+        let valid = one + self.both_valid;
+        if valid > 0.0 { one / valid } else { 1.0 }
+    }
 }
 
 /// Least cells valid in both looks for [`fuse_looks`] to align the two unwrappings' cycles.

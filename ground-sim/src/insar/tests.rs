@@ -189,6 +189,25 @@ fn a_second_look_maps_the_wall_the_first_has_in_layover() {
         .count();
     let sum = f.both_valid + f.east_only + f.west_only;
     assert!((fused_valid as f64 / both.product.labels.len() as f64 - sum).abs() < 1e-9);
+    // The wall's cells come from the west look alone: their share of the valid map is what
+    // keeps one look's range shift, and the tile's reference error scales with it.
+    let share = f.one_look_share();
+    assert!(
+        (share - (f.east_only + f.west_only) / sum).abs() < 1e-12 && share > 0.1 && share < 0.9,
+        "{share} {f:?}"
+    );
+    let full = crate::reference::reference_sigma_m(22.4, 1.0)[0];
+    let fused = crate::reference::reference_sigma_m(22.4, share)[0];
+    assert!(
+        (fused - full * share as f32).abs() < 1e-5,
+        "{fused} vs {full}"
+    );
+    assert_eq!(crate::reference::reference_sigma_m(22.4, 0.0), [0.0; 2]);
+    // A one-look map, or an unknown share, claims the whole blur term.
+    assert_eq!(
+        crate::reference::reference_sigma_m(22.4, f64::NAN),
+        [full; 2]
+    );
 }
 
 #[test]

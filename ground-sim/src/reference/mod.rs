@@ -159,13 +159,29 @@ pub const REFERENCE_SHIFT_PER_BLUR: f64 = 0.08;
 /// (`nav_core::TileHeader::reference_sigma_m`): [`REFERENCE_SHIFT_PER_BLUR`] × the blur the
 /// frames cannot reproduce, the DEM's inherent smoothing `inherent_m` (e.g. an InSAR DEM's
 /// multilook and filter blur, Gaussian-equivalent σ; its shape is not the Gaussian the frames
-/// are smoothed with, so blobs land differently). Errors that shift a whole frame alike never
-/// show in a fix's residuals, so the tile must say them. A DEM with no blur of its own (a
-/// truth-built tile) claims 0: the frames' binning and smoothing reproduce its resolution, and
-/// the suite's truth-tile fixes have mean offsets ≤ 0.3 m (docs/registration.md, where a
-/// grid-phase term, pixel/√12, was tried and left the truth tiles' σ four times too large).
-pub fn reference_sigma_m(inherent_m: f64) -> [f32; 2] {
-    let s = REFERENCE_SHIFT_PER_BLUR * inherent_m.max(0.0);
+/// are smoothed with, so blobs land differently), × `one_look_share`, the share of the map's
+/// valid cells made by one look direction alone (1 for a one-look map or when unknown).
+///
+/// Why the share: the blobs' displacement comes from a multilook window that spans more ground
+/// on slopes facing the radar than on slopes facing away, so it points along the look's range
+/// axis and flips sign with the look direction. A cell fused from an east- and a west-looking
+/// pass averages the two and cancels it to first order; a frame's fix moves by the share of its
+/// cells that keep one look's shift. κ was calibrated on one-look maps; measured on the fused
+/// maps of the default radar (session 21, docs/registration.md, Covariance), the refinement's
+/// own covariance alone already gives mean NEES 0.6–2.2 where κ × blur on top made it 0.3–1.3.
+///
+/// Errors that shift a whole frame alike never show in a fix's residuals, so the tile must say
+/// them. A DEM with no blur of its own (a truth-built tile) claims 0: the frames' binning and
+/// smoothing reproduce its resolution, and the suite's truth-tile fixes have mean offsets ≤ 0.3 m
+/// (docs/registration.md, where a grid-phase term, pixel/√12, was tried and left the truth
+/// tiles' σ four times too large).
+pub fn reference_sigma_m(inherent_m: f64, one_look_share: f64) -> [f32; 2] {
+    let share = if one_look_share.is_finite() {
+        one_look_share.clamp(0.0, 1.0)
+    } else {
+        1.0
+    };
+    let s = REFERENCE_SHIFT_PER_BLUR * inherent_m.max(0.0) * share;
     [s as f32; 2]
 }
 
@@ -203,6 +219,10 @@ pub struct Smoothing {
     /// Gaussian-equivalent σ the DEM already carries, metres (e.g. InSAR multilooking and its
     /// DEM filter); the builder applies `sqrt(target² − inherent²)`.
     pub inherent_m: f64,
+    /// Share of the DEM's valid cells made by a single look direction, 0–1 (1: a one-look
+    /// InSAR map, or unknown; 0: every cell fused from two opposite looks). Scales the blur
+    /// term of the tile's reference error ([`reference_sigma_m`]).
+    pub one_look_share: f64,
 }
 
 impl Smoothing {
@@ -211,6 +231,7 @@ impl Smoothing {
         Self {
             target_m: DEFAULT_SMOOTHING_M,
             inherent_m: 0.0,
+            one_look_share: 1.0,
         }
     }
     /// σ to apply, metres.
@@ -312,8 +333,8 @@ pub fn write_reference_with(
             .take(nav_core::tile::MAX_PROJECTION_LEN)
             .collect(),
     };
-    let ref_sigma =
-        reference_sigma_m(smoothing.inherent_m).map(|b| (b as f64).hypot(frame_wide_m) as f32);
+    let ref_sigma = reference_sigma_m(smoothing.inherent_m, smoothing.one_look_share)
+        .map(|b| (b as f64).hypot(frame_wide_m) as f32);
     let bytes = build_tile(
         &img,
         &grid,

@@ -16,9 +16,9 @@ use crate::insar::blocks::{BlockLayout, BlockSpec};
 /// Radar parameters: a TOML file, then individual overrides.
 #[derive(Debug, Clone, Default, clap::Args)]
 pub struct RadarArgs {
-    /// Named radar design the file and flags start from (default `paper`: the paper's 8 m
-    /// baseline; `mission`: the 32 m baseline that keeps the InSAR DEM within its targets at
-    /// NESZ −25 dB, docs/insar.md).
+    /// Named radar design the file and flags start from (default `mission`: 32 m baseline,
+    /// thermal noise at NESZ −25 dB, the Moon's diffuse echo at −17 dB, both look directions
+    /// for InSAR; `paper`: the paper's noise-free model, 8 m baseline, one look; docs/insar.md).
     #[arg(long, value_enum)]
     pub radar: Option<RadarPreset>,
     /// TOML file with any `SarConfig` keys (others keep the preset's values).
@@ -42,14 +42,15 @@ pub struct RadarArgs {
     /// Baseline tilt above horizontal, degrees.
     #[arg(long, allow_hyphen_values = true)]
     pub baseline_tilt_deg: Option<f64>,
-    /// Noise-equivalent σ0, dB.
-    #[arg(long, allow_hyphen_values = true)]
+    /// Noise-equivalent σ0, dB (default: the preset's; `mission` −25 dB, `paper` none).
+    #[arg(long, allow_hyphen_values = true, conflicts_with = "no_noise")]
     pub nesz_db: Option<f64>,
-    /// Disable thermal noise.
+    /// Disable thermal noise (the paper's noise-free echo model, on any preset).
     #[arg(long)]
     pub no_noise: bool,
     /// Diffuse backscatter at normal incidence, dB, of a σ0_d·cos θ law added to the paper's
-    /// two-scale surface (`-inf`: none; docs/insar.md derives −17 dB for the Moon at L band).
+    /// two-scale surface (default: the preset's; `mission` −17 dB, derived for the Moon at L
+    /// band in docs/insar.md; `paper` and `-inf`: none).
     #[arg(long, allow_hyphen_values = true)]
     pub diffuse_db: Option<f64>,
     /// Seed of the surface reflectivity and the noise.
@@ -64,9 +65,9 @@ pub struct RadarArgs {
 }
 
 impl RadarArgs {
-    /// The named design these arguments start from ([`RadarPreset::Paper`] unless given).
+    /// The named design these arguments start from ([`RadarPreset::Mission`] unless given).
     pub fn preset(&self) -> RadarPreset {
-        self.radar.unwrap_or(RadarPreset::Paper)
+        self.radar.unwrap_or_default()
     }
 
     /// Defaults ← TOML file ← flags, validated.
@@ -431,17 +432,31 @@ mod tests {
     }
 
     #[test]
-    fn the_default_radar_is_the_paper_and_mission_is_named() {
-        use crate::sar::MISSION_BASELINE_M;
+    fn the_default_radar_is_the_noisy_mission_and_paper_is_noise_free() {
+        use crate::sar::{MISSION_BASELINE_M, MISSION_NESZ_DB, MOON_DIFFUSE_DB};
         let def = RadarArgs::default().resolve().unwrap();
-        assert_eq!(format!("{def:?}"), format!("{:?}", SarConfig::default()));
-        let mission = RadarArgs {
-            radar: Some(RadarPreset::Mission),
+        assert_eq!(def.baseline_m, MISSION_BASELINE_M);
+        assert_eq!(def.noise_equivalent_sigma0_db, MISSION_NESZ_DB);
+        assert_eq!(def.diffuse_sigma0_db, MOON_DIFFUSE_DB);
+        assert!(def.noise_sigma0_linear().is_some());
+        let paper = RadarArgs {
+            radar: Some(RadarPreset::Paper),
             ..RadarArgs::default()
         }
         .resolve()
         .unwrap();
-        assert_eq!(mission.baseline_m, MISSION_BASELINE_M);
+        // The paper's table, without noise or diffuse echo.
+        assert_eq!(paper.baseline_m, 8.0);
+        assert!(paper.noise_sigma0_linear().is_none());
+        assert_eq!(paper.diffuse_sigma0_db, f64::NEG_INFINITY);
+        let quiet_mission = RadarArgs {
+            no_noise: true,
+            ..RadarArgs::default()
+        }
+        .resolve()
+        .unwrap();
+        assert!(quiet_mission.noise_sigma0_linear().is_none());
+        assert_eq!(quiet_mission.baseline_m, MISSION_BASELINE_M);
         // A TOML file overrides the preset's keys and keeps the others.
         let dir = tempfile::tempdir().unwrap();
         let p = dir.path().join("sar.toml");
@@ -455,5 +470,6 @@ mod tests {
         .unwrap();
         assert_eq!(cfg.altitude_m, 90_000.0);
         assert_eq!(cfg.baseline_m, MISSION_BASELINE_M);
+        assert_eq!(cfg.noise_equivalent_sigma0_db, MISSION_NESZ_DB);
     }
 }

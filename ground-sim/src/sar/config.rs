@@ -13,25 +13,60 @@ use super::{SPEED_OF_LIGHT_M_S, SarError, SarResult};
 /// "Radar design under NESZ −25 dB"); a boom of that length has flown (SRTM's 60 m mast).
 pub const MISSION_BASELINE_M: f64 = 32.0;
 
-/// Named radar designs. Both keep every parameter of the paper but the baseline.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+/// Thermal noise of the [`RadarPreset::Mission`] design (the default radar), NESZ in dB: the
+/// noise level of a typical spaceborne L-band SAR (SAOCOM's L-band instrument, at 1275 MHz, is
+/// specified at −28 dB in its single and dual polarisation modes; −25 dB leaves 3 dB for a
+/// smaller lunar orbiter). docs/insar.md, "Radar design under NESZ −25 dB".
+pub const MISSION_NESZ_DB: f64 = -25.0;
+
+/// Diffuse backscatter of the Moon's surface at normal incidence, dB, of the `σ0_d·cos θ` law
+/// the [`RadarPreset::Mission`] scenes carry beside the paper's two-scale model: a 20–25 %
+/// diffuse share of the Moon's total radar cross-section (≈ 0.07 of its disk, Earth-based
+/// radar), fixed before any scene was run with it (docs/insar.md, "Walls under noise").
+pub const MOON_DIFFUSE_DB: f64 = -17.0;
+
+/// Named radar designs (with the surface model they are flown over). The default is
+/// [`RadarPreset::Mission`]: a realistic radar with thermal noise; [`RadarPreset::Paper`]
+/// reproduces the paper's noise-free echo model exactly.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "lowercase")]
 pub enum RadarPreset {
-    /// The paper's radar: 8 m baseline tilted 30° (height of ambiguity ≈ 733 m).
+    /// The paper's model: 8 m baseline tilted 30° (height of ambiguity ≈ 733 m), no thermal
+    /// noise, the two-scale surface alone, one look (east).
     Paper,
-    /// The mission design: the paper's radar with a [`MISSION_BASELINE_M`] boom.
+    /// The mission design: the paper's radar with a [`MISSION_BASELINE_M`] boom, thermal noise
+    /// at [`MISSION_NESZ_DB`], the Moon's diffuse echo ([`MOON_DIFFUSE_DB`]) and two passes
+    /// looking east and west (the look count is the InSAR chain's:
+    /// `insar::pipeline::LookDirections::of_preset`).
+    #[default]
     Mission,
 }
 
 impl RadarPreset {
-    /// The preset's configuration: the paper's [`SarConfig::default`] with the preset's
-    /// baseline (thermal noise as the default's; the commands choose it).
+    /// The preset's configuration: [`SarConfig::default`] (the paper's table) with the
+    /// preset's baseline, thermal noise and diffuse term.
     pub fn config(self) -> SarConfig {
         let mut c = SarConfig::default();
-        if self == RadarPreset::Mission {
-            c.baseline_m = MISSION_BASELINE_M;
+        match self {
+            RadarPreset::Paper => {
+                c.noise_equivalent_sigma0_db = f64::NEG_INFINITY;
+                c.diffuse_sigma0_db = f64::NEG_INFINITY;
+            }
+            RadarPreset::Mission => {
+                c.baseline_m = MISSION_BASELINE_M;
+                c.noise_equivalent_sigma0_db = MISSION_NESZ_DB;
+                c.diffuse_sigma0_db = MOON_DIFFUSE_DB;
+            }
         }
         c
+    }
+
+    /// The name the CLI and the reports use (`paper`, `mission`).
+    pub fn name(self) -> &'static str {
+        match self {
+            RadarPreset::Paper => "paper",
+            RadarPreset::Mission => "mission",
+        }
     }
 }
 
@@ -80,7 +115,9 @@ impl std::str::FromStr for Polarisation {
     }
 }
 
-/// Every input parameter of the SAR simulation. Defaults are the paper's values; the pulse
+/// Every input parameter of the SAR simulation. Defaults are the paper's values (with thermal
+/// noise at −30 dB, which the paper does not have; the commands start from a [`RadarPreset`]
+/// instead, the [`RadarPreset::Mission`] design unless told otherwise); the pulse
 /// width (not given by the paper) is 10 µs: 684 samples at `fs = 2B`, a time–bandwidth product
 /// of 342, long enough for a clean chirp spectrum and short enough to keep the echo window
 /// (chirp + swath) under 2048 samples for a 4 km scene.

@@ -52,7 +52,10 @@ pub mod slc;
 #[cfg(test)]
 mod tests;
 
-pub use config::{Derived, MISSION_BASELINE_M, Polarisation, RadarPreset, SarConfig};
+pub use config::{
+    Derived, MISSION_BASELINE_M, MISSION_NESZ_DB, MOON_DIFFUSE_DB, Polarisation, RadarPreset,
+    SarConfig,
+};
 pub use geometry::{AcquisitionPlan, Antenna, Geometry, SarDem};
 pub use pipeline::{InsarPair, simulate_insar_pair};
 pub use slc::Slc;

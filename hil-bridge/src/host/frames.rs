@@ -334,7 +334,7 @@ pub fn generate_set(terrain_frames: usize) -> Result<FrameSet> {
         &SurfConfig::default(),
         MAX_TILE_FEATURES,
         smoothing_m,
-        ground_sim::reference::reference_sigma_m(0.0),
+        ground_sim::reference::reference_sigma_m(0.0, 1.0),
     )
     .context("reference tile")?;
 
