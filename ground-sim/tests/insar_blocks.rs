@@ -114,6 +114,8 @@ fn blocks_in_separate_processes_mosaic_to_the_one_process_map() {
         dir.path().join("blocked"),
         dir.path().join("split"),
     );
+    // One look of the paper's radar: the mosaic path without a look fusion (the default radar's
+    // two noisy looks are `both_look_directions_in_blocks` below).
     let common = |out: &Path| -> Vec<String> {
         [
             "insar",
@@ -122,6 +124,8 @@ fn blocks_in_separate_processes_mosaic_to_the_one_process_map() {
             "--out",
             path(out),
             "--no-progress",
+            "--radar",
+            "paper",
             "--block-cells",
             "40",
             "--block-overlap-cells",
@@ -154,6 +158,8 @@ fn blocks_in_separate_processes_mosaic_to_the_one_process_map() {
     let flags = [
         "--dem",
         path(&dem),
+        "--radar",
+        "paper",
         "--block-cells",
         "40",
         "--block-overlap-cells",
@@ -201,6 +207,8 @@ fn blocks_in_separate_processes_mosaic_to_the_one_process_map() {
         "--out",
         path(&one),
         "--no-progress",
+        "--radar",
+        "paper",
         "--block-cells",
         "0",
     ]);
@@ -234,11 +242,10 @@ fn blocks_in_separate_processes_mosaic_to_the_one_process_map() {
         &["--mosaic", "--min-coherence", "0.4"],
     )));
     assert!(e.contains("other settings"), "{e}");
-    // Blocks made and joined in other processes belong to their look directions (the default
-    // radar flies both; these blocks may not be joined as one look's).
+    // Blocks made and joined in other processes belong to their look directions.
     let e = refused(&refs(&args(
         &common(&split),
-        &["--mosaic", "--looks", "one"],
+        &["--mosaic", "--looks", "both"],
     )));
     assert!(e.contains("other settings"), "{e}");
     let e = refused(&[
@@ -335,4 +342,13 @@ fn both_look_directions_in_blocks() {
         o["height_rmse_m"]
     );
     assert_eq!(b["blocks"]["overlap_cycle_disagreements"], 0);
+    // Both maps claim the reference error of their one-look share, blocked as in one piece.
+    let sigma = |d: &Path| -> f64 {
+        let t: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(d.join("tile.json")).unwrap()).unwrap();
+        t["reference_sigma_m"][0].as_f64().unwrap()
+    };
+    let (sb, so) = (sigma(&blocked), sigma(&one));
+    assert!(sb < 0.9 && so < 0.9, "blocked {sb} m, one piece {so} m");
+    assert!((sb - so).abs() < 0.1, "blocked {sb} m vs one piece {so} m");
 }

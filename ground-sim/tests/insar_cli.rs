@@ -147,4 +147,14 @@ fn insar_folder_works_with_trn_and_eval() {
     );
     assert!((a - b).abs() < 1e-6, "{a} vs {b}");
     assert!(r2["looks"].is_null(), "one pass of SLCs is one look: {r2}");
+    // The map's own error the tiles claim: a one-look map the whole blur term (0.08 × 22.4 m),
+    // the two-look map only its share of cells made by one look alone.
+    let sigma = |d: &Path| -> f64 {
+        let t: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(d.join("tile.json")).unwrap()).unwrap();
+        t["reference_sigma_m"][0].as_f64().unwrap()
+    };
+    let (fused, one) = (sigma(&ins), sigma(&ins1));
+    assert!((one - 0.08 * 22.36).abs() < 0.01, "one look: {one}");
+    assert!(fused < 0.5 * one, "two looks: {fused} vs {one}");
 }

@@ -57,15 +57,16 @@ fn quick_suite_outputs_agree_with_each_other() {
     // 2 scenes × {truth, InSAR tile} × {no prior, prior}.
     assert_eq!(rows.len(), 8, "{r}");
     for sc in r["scenes"].as_array().unwrap() {
-        // The InSAR tile's accuracy is carried into the report (noise-free radar: metres, not
-        // tens of metres).
+        // The InSAR tile's accuracy is carried into the report (the default radar, thermal
+        // noise at −25 dB and both looks: metres, not tens of metres).
         let h = sc["insar_height_rmse_m"].as_f64().unwrap();
         assert!(h > 0.0 && h < 10.0, "{sc}");
     }
-    assert!(
-        r["spec"]["radar"]["baseline_m"].as_f64().is_some(),
-        "radar not recorded"
-    );
+    // The default radar is recorded: the mission design, noisy, both looks.
+    let radar = &r["spec"]["radar"];
+    assert_eq!(radar["baseline_m"], 32.0, "{radar}");
+    assert_eq!(radar["noise_equivalent_sigma0_db"], -25.0, "{radar}");
+    assert_eq!(r["spec"]["looks"], "both", "{}", r["spec"]);
     assert!(out.join("suite.png").exists() && out.join("suite.md").exists());
     let table = std::fs::read_to_string(out.join("suite.md")).unwrap();
     assert!(table.contains("| lola | truth") && table.contains("| fresh-rim | insar"));
@@ -240,6 +241,7 @@ fn trade_runs_a_design_point_end_to_end() {
         "8",
         "--looks",
         "one",
+        "--diffuse-db=-inf",
         "--trials",
         "6",
         "--size-m",
@@ -258,6 +260,7 @@ fn trade_runs_a_design_point_end_to_end() {
         p["nesz_db"].is_null(),
         "no thermal noise is recorded as null"
     );
+    assert!(j["diffuse_db"].is_null(), "the paper's surface: {j}");
     let crlb = p["crlb_height_m"].as_f64().unwrap();
     let rmse = p["height_rmse_m"].as_f64().unwrap();
     // Noise-free, the 8 m radar maps lola to about a metre (1.09 m on the 4 km scene).

@@ -55,7 +55,7 @@ pub struct Args {
     /// Thermal noise of the radar, NESZ in dB (default: the design's, −25 dB for `mission`).
     #[arg(long, allow_hyphen_values = true, conflicts_with = "no_noise")]
     pub nesz_db: Option<f64>,
-    /// No thermal noise (the paper's echo model).
+    /// No thermal noise (only the noise: `--radar paper` for the paper's whole model).
     #[arg(long)]
     pub no_noise: bool,
     /// Diffuse surface backscatter at normal incidence, dB (default: the design's, −17 dB for

@@ -51,8 +51,8 @@ pub struct Args {
     #[arg(long)]
     pub no_unwrap: bool,
     /// Radar parameters (the first `--pol` is the InSAR channel, default HH). The default is
-    /// the mission design with thermal noise at NESZ −25 dB; `--radar paper` (or `--no-noise`)
-    /// gives the paper's noise-free echo model.
+    /// the mission design with thermal noise at NESZ −25 dB; `--radar paper` gives the paper's
+    /// noise-free model, `--no-noise` removes the thermal noise only.
     #[command(flatten)]
     pub radar: RadarArgs,
     /// Look directions: `one` (east, as the paper) or `both` (a second, west-looking pass over

@@ -625,7 +625,7 @@ pub fn run(a: &Args, dispatch: &dyn Fn(&[String]) -> anyhow::Result<()>) -> anyh
     Ok(())
 }
 
-/// The paper's setting: reference tiles from the simulated single-pass InSAR of each preset
+/// The paper's setting: reference tiles from the simulated InSAR of each preset
 /// (`ground-sim insar` with the default radar, the noisy mission design), the Fig. 7 cases
 /// and an `eval` campaign against them.
 fn insar_section(

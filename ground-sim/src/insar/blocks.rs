@@ -626,12 +626,15 @@ pub struct Mosaic {
     pub filled_nodata: usize,
 }
 
-/// The blocks' look fusions as one, each block weighted by its cells (margins included).
+/// The blocks' look fusions as one, each block weighted by the cells it owns (its core: the
+/// cores tile the map once, so the map's fractions are not skewed by the margins that
+/// neighbouring blocks share). Each block's fractions are over its whole extent, so the result
+/// approximates the mosaic's own fractions.
 fn fused_looks(blocks: &[BlockProduct]) -> Option<LookFusion> {
     let parts: Vec<(f64, LookFusion)> = blocks
         .iter()
         .map(|b| {
-            let e = b.record.block.extent;
+            let e = b.record.block.core;
             b.record
                 .look_fusion
                 .map(|f| ((e.width() * e.height()) as f64, f))

@@ -166,9 +166,10 @@ pub const REFERENCE_SHIFT_PER_BLUR: f64 = 0.08;
 /// on slopes facing the radar than on slopes facing away, so it points along the look's range
 /// axis and flips sign with the look direction. A cell fused from an east- and a west-looking
 /// pass averages the two and cancels it to first order; a frame's fix moves by the share of its
-/// cells that keep one look's shift. κ was calibrated on one-look maps; measured on the fused
-/// maps of the default radar (session 21, docs/registration.md, Covariance), the refinement's
-/// own covariance alone already gives mean NEES 0.6–2.2 where κ × blur on top made it 0.3–1.3.
+/// cells that keep one look's shift. κ was calibrated on one-look maps; on the fused maps of
+/// the default radar (session 21, docs/insar.md, "The default radar") κ × blur made the
+/// fixes padded (mean NEES 0.30–0.97 on the seed-1 suite), with the share 0.62–1.87. The share
+/// is the whole map's: frames over the parts one look maps alone (walls) claim too little.
 ///
 /// Errors that shift a whole frame alike never show in a fix's residuals, so the tile must say
 /// them. A DEM with no blur of its own (a truth-built tile) claims 0: the frames' binning and

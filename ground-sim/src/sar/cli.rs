@@ -21,7 +21,8 @@ pub struct RadarArgs {
     /// for InSAR; `paper`: the paper's noise-free model, 8 m baseline, one look; docs/insar.md).
     #[arg(long, value_enum)]
     pub radar: Option<RadarPreset>,
-    /// TOML file with any `SarConfig` keys (others keep the preset's values).
+    /// TOML file with any `SarConfig` keys (others keep the preset's values; the InSAR look
+    /// count is not a `SarConfig` key: it follows `--radar` and `--looks`).
     #[arg(long)]
     pub config: Option<PathBuf>,
     /// Platform altitude above the scene mean, m.
@@ -45,7 +46,8 @@ pub struct RadarArgs {
     /// Noise-equivalent σ0, dB (default: the preset's; `mission` −25 dB, `paper` none).
     #[arg(long, allow_hyphen_values = true, conflicts_with = "no_noise")]
     pub nesz_db: Option<f64>,
-    /// Disable thermal noise (the paper's noise-free echo model, on any preset).
+    /// Disable thermal noise only (the design's baseline, diffuse echo and looks stay;
+    /// `--radar paper` for the paper's whole noise-free model).
     #[arg(long)]
     pub no_noise: bool,
     /// Diffuse backscatter at normal incidence, dB, of a σ0_d·cos θ law added to the paper's
@@ -471,5 +473,17 @@ mod tests {
         assert_eq!(cfg.altitude_m, 90_000.0);
         assert_eq!(cfg.baseline_m, MISSION_BASELINE_M);
         assert_eq!(cfg.noise_equivalent_sigma0_db, MISSION_NESZ_DB);
+        // Over the paper's preset, whose noise and diffuse echo are -inf in the TOML base.
+        let cfg = RadarArgs {
+            radar: Some(RadarPreset::Paper),
+            config: Some(dir.path().join("sar.toml")),
+            ..RadarArgs::default()
+        }
+        .resolve()
+        .unwrap();
+        assert_eq!(cfg.altitude_m, 90_000.0);
+        assert_eq!(cfg.baseline_m, 8.0);
+        assert!(cfg.noise_sigma0_linear().is_none());
+        assert_eq!(cfg.diffuse_sigma0_db, f64::NEG_INFINITY);
     }
 }

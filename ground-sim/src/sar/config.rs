@@ -157,7 +157,8 @@ pub struct SarConfig {
     /// SPM normalised height standard deviation k·δ2.
     pub spm_ks: f64,
     /// Diffuse backscatter at normal incidence, dB, of a `σ0_d·cos θ` law added to the
-    /// two-scale model (`-inf` = none, the paper's model and the default). Not in the paper:
+    /// two-scale model (`-inf` = none: the paper's model and this struct's default; the
+    /// [`RadarPreset::Mission`] design the commands fly by default sets [`MOON_DIFFUSE_DB`]). Not in the paper:
     /// the Moon's non-directional echo, which dominates beyond ≈ 40° local incidence
     /// (docs/insar.md, "Walls under noise", derives −17 dB from lunar radar measurements).
     pub diffuse_sigma0_db: f64,

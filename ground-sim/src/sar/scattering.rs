@@ -16,8 +16,8 @@
 //! With `S = γ·sqrt(A/4π)` (eq 1) the facet's mean radar cross-section is `|γ|²·A`, so
 //! `⟨|γ_pq|²⟩` is the facet's σ0.
 //!
-//! Beyond the paper, an optional diffuse term `σ0_d·cos θ` ([`TwoScaleModel::diffuse_sigma0`],
-//! off by default) adds the Moon's non-directional echo (wavelength-scale rocks and the
+//! Beyond the paper, a diffuse term `σ0_d·cos θ` ([`TwoScaleModel::diffuse_sigma0`]; off in
+//! `SarConfig::default()` and `--radar paper`, −17 dB in the default mission design) adds the Moon's non-directional echo (wavelength-scale rocks and the
 //! regolith's volume), which the two-scale model lacks: with its Gaussian SPM spectrum the
 //! paper's σ0 falls to −40 dB at 59° local incidence, below any real radar's noise, so a
 //! 33° wall facing away from the radar vanishes under NESZ −25 dB. The term is added in power
