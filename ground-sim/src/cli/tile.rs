@@ -96,17 +96,17 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         }
         cfg.detector.threshold = t;
     }
-    let smoothing = Smoothing {
-        target_m: a.smoothing_m,
-        inherent_m: a.inherent_smoothing_m,
-        one_look_share: a.one_look_share,
-    };
     if !(0.0..=1.0).contains(&a.one_look_share) {
         anyhow::bail!(
             "--one-look-share must be in [0, 1], got {}",
             a.one_look_share
         );
     }
+    let smoothing = Smoothing {
+        target_m: a.smoothing_m,
+        inherent_m: a.inherent_smoothing_m,
+        one_look_share: a.one_look_share,
+    };
     let max_features = a.max_features.min(MAX_TILE_FEATURES);
     let mut s = write_reference_with(&r, &a.out, &cfg, max_features, smoothing, 0.0)?;
     let mut calibration = None;

@@ -426,10 +426,7 @@ pub fn run_block(job: &BlockJob<'_>, index: usize) -> anyhow::Result<BlockRecord
             &format!("block {index}, west-looking pass"),
         )?;
         look_fusion = Some(fuse_looks(&mut east.product, &west.product)?);
-        east.timings.scene_s += west.timings.scene_s;
-        east.timings.echoes_s += west.timings.echoes_s;
-        east.timings.focusing_s += west.timings.focusing_s;
-        east.timings.total_s += west.timings.total_s;
+        east.timings += &west.timings;
         for (a, b) in east.facets.iter_mut().zip(west.facets) {
             *a += b;
         }
@@ -808,11 +805,7 @@ pub fn mosaic(job: &BlockJob<'_>) -> anyhow::Result<Mosaic> {
         facets: [0; 3],
     };
     for b in &blocks {
-        let t = &b.record.sar_timings;
-        sar.timings.scene_s += t.scene_s;
-        sar.timings.echoes_s += t.echoes_s;
-        sar.timings.focusing_s += t.focusing_s;
-        sar.timings.total_s += t.total_s;
+        sar.timings += &b.record.sar_timings;
         for (a, v) in sar.facets.iter_mut().zip(b.record.facets) {
             *a += v;
         }

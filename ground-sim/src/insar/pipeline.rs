@@ -879,11 +879,7 @@ pub fn run_from_dem_looks(
     let west = run_from_dem(&mirrored_dem(truth)?, sar, pol, cfg, progress)?;
     fuse_looks(&mut east.product, &west.product)?;
     // The run's SAR time is both passes' (as a map in blocks reports it).
-    let (t, w) = (&mut east.pair.timings, &west.pair.timings);
-    t.scene_s += w.scene_s;
-    t.echoes_s += w.echoes_s;
-    t.focusing_s += w.focusing_s;
-    t.total_s += w.total_s;
+    east.pair.timings += &west.pair.timings;
     Ok(east)
 }
 

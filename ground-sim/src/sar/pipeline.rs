@@ -123,6 +123,17 @@ pub struct Timings {
     pub total_s: f64,
 }
 
+impl std::ops::AddAssign<&Timings> for Timings {
+    /// Stage by stage: a run of several simulations (both look directions, many blocks) reports
+    /// their sum.
+    fn add_assign(&mut self, o: &Timings) {
+        self.scene_s += o.scene_s;
+        self.echoes_s += o.echoes_s;
+        self.focusing_s += o.focusing_s;
+        self.total_s += o.total_s;
+    }
+}
+
 /// Two antennas' SLCs with everything needed to interpret them.
 #[derive(Debug, Clone)]
 pub struct InsarPair {
