@@ -147,6 +147,32 @@ fn insar_folder_works_with_trn_and_eval() {
     );
     assert!((a - b).abs() < 1e-6, "{a} vs {b}");
     assert!(r2["looks"].is_null(), "one pass of SLCs is one look: {r2}");
+    // Both runs chose their cycles with the coarse prior DEM (one patch, nothing to move here).
+    for r in [&r1, &r2] {
+        assert_eq!(r["unwrap"]["prior"]["ran"].as_bool(), Some(true), "{r}");
+        assert!(r["unwrap"]["prior"]["median_residual_m"].as_f64().unwrap() < 20.0);
+    }
+    // One pass of SLCs cannot be stacked.
+    let out = Command::new(env!("CARGO_BIN_EXE_ground-sim"))
+        .args([
+            "insar",
+            "--dem",
+            path(&dem),
+            "--slc-dir",
+            path(&sar),
+            "--passes",
+            "2",
+            "--out",
+            path(&dir.path().join("insar3")),
+        ])
+        .output()
+        .expect("ground-sim runs");
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("--passes 2 simulates its passes itself"),
+        "{err}"
+    );
     // The map's own error the tiles claim: a one-look map the whole blur term (0.08 × 22.4 m),
     // the two-look map only its share of cells made by one look alone.
     let sigma = |d: &Path| -> f64 {

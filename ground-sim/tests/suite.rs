@@ -222,6 +222,10 @@ fn trade_refuses_bad_input_clearly() {
     let out = ground_sim(&["trade", "--trials", "0", "--out", path(dir.path())]);
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("--trials must be"));
+    let out = ground_sim(&["trade", "--passes", "1,0", "--out", path(dir.path())]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("--passes must be 1–16, got 0"), "{err}");
     // Nothing was written for refused input.
     assert!(!dir.path().join("trade.json").exists());
 }
@@ -271,7 +275,12 @@ fn trade_runs_a_design_point_end_to_end() {
     assert!((0.0..=1.0).contains(&success));
     assert_eq!(p["false_fixes"].as_u64(), Some(0));
     let table = std::fs::read_to_string(dir.path().join("trade.md")).unwrap();
-    assert!(table.contains("| lola | one | 8 m | none |"), "{table}");
+    assert_eq!(
+        p["passes"].as_u64(),
+        Some(1),
+        "one pass unless --passes says more"
+    );
+    assert!(table.contains("| lola | one | 1 | 8 m | none |"), "{table}");
     let png = std::fs::read(dir.path().join("trade.png")).unwrap();
     assert!(png.starts_with(b"\x89PNG"));
 }

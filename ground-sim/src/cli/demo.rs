@@ -21,11 +21,12 @@ use ground_sim::flyer::frames::{FramePose, SensorModel};
 use ground_sim::flyer::onboard::Budget;
 use ground_sim::insar::InsarConfig;
 use ground_sim::insar::pipeline::{
-    LookDirections, fuse_looks, mirrored_dem, process_simulated, run_from_dem,
+    LookDirections, fuse_looks, mirrored_dem, process_simulated, run_from_dem, west_pass_seed,
 };
 use ground_sim::insar::products::{InsarReport, RunContext, SarSummary, write_outputs};
 use ground_sim::reference::load;
 use ground_sim::sar::RadarPreset;
+use ground_sim::sar::SarConfig;
 use ground_sim::sar::SarDem;
 use ground_sim::sar::cli::RadarArgs;
 use ground_sim::sar::pipeline::{SimOptions, simulate_with};
@@ -184,7 +185,12 @@ pub fn run_demo(a: &Args) -> anyhow::Result<DemoSummary> {
     let mut sar_summary = SarSummary::of(&pair);
     if looks == LookDirections::Both {
         // The west-looking pass: the same radar over the mirrored scene, fused cell by cell.
-        let west = run_from_dem(&mirrored_dem(&truth)?, &sar_cfg, pol, &cfg, !a.no_progress)?;
+        // Its own noise, as `run_from_dem_looks` draws it.
+        let west_sar = SarConfig {
+            seed: west_pass_seed(sar_cfg.seed),
+            ..sar_cfg.clone()
+        };
+        let west = run_from_dem(&mirrored_dem(&truth)?, &west_sar, pol, &cfg, !a.no_progress)?;
         fuse_looks(&mut product, &west.product)?;
         // The report's SAR time is both passes' (as `insar` reports it).
         sar_summary.timings += &west.pair.timings;

@@ -50,6 +50,16 @@ pub struct Args {
     /// Use the flat-removed phase wrapped (no unwrapping).
     #[arg(long)]
     pub no_unwrap: bool,
+    /// Cell of the coarse prior DEM that picks the unwrapped phase's whole cycles, m (the
+    /// `--dem` averaged over such cells, standing for LOLA's global topography; 0 = none, the
+    /// unwrapper's datum rule alone). It never enters a height.
+    #[arg(long, default_value_t = InsarConfig::default().prior_dem_cell_m)]
+    pub prior_dem_cell_m: f64,
+    /// Passes of one track stacked per look, 1–16: their interferograms are summed before the
+    /// phase and coherence are taken (independent receiver noise, the same ground; each pass
+    /// adds its SAR time). Not with `--slc-dir`.
+    #[arg(long, default_value_t = 1)]
+    pub passes: usize,
     /// Radar parameters (the first `--pol` is the InSAR channel, default HH). The default is
     /// the mission design with thermal noise at NESZ −25 dB; `--radar paper` gives the paper's
     /// noise-free model, `--no-noise` removes the thermal noise only.
@@ -131,6 +141,8 @@ pub fn run_chain(a: &Args) -> anyhow::Result<Outcome> {
         dem_filter_sigma_px: a.dem_filter_sigma_px,
         recentre_passes: a.recentre_passes,
         shadow_below_median_db: a.shadow_below_median_db,
+        prior_dem_cell_m: a.prior_dem_cell_m,
+        passes: a.passes,
         ..InsarConfig::default()
     }
     .with_radar(&sar);
@@ -169,7 +181,13 @@ pub fn run_chain(a: &Args) -> anyhow::Result<Outcome> {
                 "--looks both simulates both passes itself; --slc-dir holds one pass (drop one of them)"
             )
         }
-        None if a.looks() == LookDirections::Both => {
+        Some(_) if cfg.passes > 1 => {
+            anyhow::bail!(
+                "--passes {} simulates its passes itself; --slc-dir holds one pass (drop one of them)",
+                cfg.passes
+            )
+        }
+        None if a.looks() == LookDirections::Both || cfg.passes > 1 => {
             let run = run_from_dem_looks(&truth, &sar, pol, &cfg, !a.no_progress, a.looks())?;
             ctx.filled_nodata = run.filled_nodata;
             ctx.sar = Some(SarSummary::of(&run.pair));

@@ -643,6 +643,7 @@ fn insar_section(
         ground_sim::evaluation::suite::radar_words(
             &ground_sim::sar::RadarPreset::default().config(),
             ground_sim::insar::pipeline::LookDirections::of_preset(Default::default()),
+            1,
         )
     )?;
     let mut dem_rows = String::new();

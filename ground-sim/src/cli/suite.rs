@@ -62,6 +62,10 @@ pub struct Args {
     /// Default: the radar preset's (`mission` both, `paper` one).
     #[arg(long, value_enum)]
     pub looks: Option<ground_sim::insar::pipeline::LookDirections>,
+    /// Passes of one track stacked per look for the InSAR tiles (1–16; receiver noise
+    /// independent per pass, the same ground; each pass adds its SAR time).
+    #[arg(long, default_value_t = 1)]
+    pub passes: usize,
     /// The navigator budget.
     #[command(flatten)]
     pub budget: super::BudgetArgs,
@@ -120,6 +124,7 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         radar,
         polarisation,
         looks: super::insar::looks_or_preset(a.looks, &a.radar),
+        passes: a.passes,
         navmap: NavmapThresholds::default(),
         budget: a.budget.budget,
     };

@@ -33,6 +33,10 @@ pub struct Args {
     /// Look directions.
     #[arg(long, value_enum, value_delimiter = ',', default_values_t = [LookDirections::One, LookDirections::Both])]
     pub looks: Vec<LookDirections>,
+    /// Passes of one track stacked per look (1–16; independent receiver noise, the same
+    /// ground).
+    #[arg(long, value_delimiter = ',', default_values_t = [1usize])]
+    pub passes: Vec<usize>,
     /// Diffuse surface backscatter at normal incidence, dB, for every point (default the
     /// Moon's, as the default mission radar flies; `-inf`: none, the paper's two-scale
     /// surface; docs/insar.md, "Walls under noise").
@@ -69,6 +73,8 @@ pub struct TradePoint {
     pub baseline_m: f64,
     /// Look directions.
     pub looks: LookDirections,
+    /// Passes stacked per look.
+    pub passes: usize,
     /// RMS per-pixel Cramér–Rao height bound of the chosen processing, m (for `both`, of the
     /// fused map: inverse-variance combination where both looks are valid).
     pub crlb_height_m: f64,
@@ -125,8 +131,19 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
     if a.nesz_db.iter().any(|v| v.is_nan()) || a.baseline_m.iter().any(|b| !(*b > 0.0)) {
         bail!("--nesz-db must be numbers (or -inf) and --baseline-m positive");
     }
-    if a.nesz_db.is_empty() || a.baseline_m.is_empty() || a.looks.is_empty() {
-        bail!("--nesz-db, --baseline-m and --looks each need at least one value");
+    if a.nesz_db.is_empty() || a.baseline_m.is_empty() || a.looks.is_empty() || a.passes.is_empty()
+    {
+        bail!("--nesz-db, --baseline-m, --looks and --passes each need at least one value");
+    }
+    if let Some(p) = a
+        .passes
+        .iter()
+        .find(|&&p| !(1..=ground_sim::insar::pipeline::MAX_PASSES).contains(&p))
+    {
+        bail!(
+            "--passes must be 1–{}, got {p}",
+            ground_sim::insar::pipeline::MAX_PASSES
+        );
     }
     if !(a.size_m >= 1000.0 && a.size_m <= 20_000.0) {
         bail!("--size-m must be in [1000, 20000] m");
@@ -150,7 +167,8 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         heading_sigma_deg: 2.0,
         scale_sigma: 0.02,
     });
-    let n_points = scenes.len() * a.nesz_db.len() * a.baseline_m.len() * a.looks.len();
+    let n_points =
+        scenes.len() * a.nesz_db.len() * a.baseline_m.len() * a.looks.len() * a.passes.len();
     let pb = super::progress(n_points as u64, "trade");
     let mut report = TradeReport {
         trials: a.trials,
@@ -163,76 +181,88 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         points: Vec::new(),
         seconds: 0.0,
     };
-    for scene in &scenes {
-        for &looks in &a.looks {
-            for &baseline_m in &a.baseline_m {
-                for &nesz in &a.nesz_db {
-                    let t = Instant::now();
-                    let radar = SarConfig {
-                        baseline_m,
-                        noise_equivalent_sigma0_db: nesz,
-                        diffuse_sigma0_db: a.diffuse_db,
-                        polarisations: vec![Polarisation::HH],
-                        ..SarConfig::default()
-                    };
-                    let spec = SuiteSpec {
-                        trials: a.trials,
-                        seed: a.campaign_seed,
-                        pixel_range_m: [9.0, 11.0],
-                        sensor: Default::default(),
-                        kinds: vec![TileKind::Insar],
-                        priors: vec![prior],
-                        reference_pixel_m: 20.0,
-                        radar,
-                        polarisation: Polarisation::HH,
-                        looks,
-                        navmap: NavmapThresholds::default(),
-                        budget: a.budget.budget,
-                    };
-                    let tag = format!(
-                        "{}-{}-b{baseline_m}-{}",
-                        scene.name,
-                        looks.name(),
-                        if nesz.is_finite() {
-                            format!("nesz{nesz}")
-                        } else {
-                            "quiet".to_string()
-                        }
-                    );
-                    let dir = a.out.join(&tag);
-                    let hidden = indicatif::ProgressBar::hidden();
-                    let (sr, rows) = run_scene(scene, &spec, &dir, &hidden)?;
-                    let row = rows.first().context("the point ran no campaign")?;
-                    let p = TradePoint {
-                        scene: scene.name.clone(),
-                        nesz_db: nesz.is_finite().then_some(nesz),
-                        baseline_m,
-                        looks,
-                        crlb_height_m: sr.insar_crlb_height_m.unwrap_or(f64::NAN),
-                        height_rmse_m: sr.insar_height_rmse_m.unwrap_or(f64::NAN),
-                        slope_rmse_deg: sr.insar_slope_rmse_deg.unwrap_or(f64::NAN),
-                        valid_fraction: sr.insar_valid_frac.unwrap_or(f64::NAN),
-                        tile_features: row.tile_features,
-                        success_rate: row.summary.success_rate,
-                        false_fixes: row.summary.false_fixes,
-                        pos_err_p95_m: row.summary.pos_err_p95_m,
-                        seconds: t.elapsed().as_secs_f64(),
-                    };
-                    let line = format!(
-                        "{tag:<34} height {:.2} m (CRLB {:.2}), slope {:.2}°, {} features, TRN {:.1} %, {} false",
-                        p.height_rmse_m,
-                        p.crlb_height_m,
-                        p.slope_rmse_deg,
-                        p.tile_features,
-                        100.0 * p.success_rate,
-                        p.false_fixes
-                    );
-                    pb.suspend(|| println!("{line}"));
-                    pb.inc(1);
-                    report.points.push(p);
-                }
+    let points = scenes.iter().flat_map(|scene| {
+        a.looks.iter().flat_map(move |&looks| {
+            a.passes.iter().flat_map(move |&passes| {
+                a.baseline_m.iter().flat_map(move |&baseline_m| {
+                    a.nesz_db
+                        .iter()
+                        .map(move |&nesz| (scene, looks, passes, baseline_m, nesz))
+                })
+            })
+        })
+    });
+    for (scene, looks, passes, baseline_m, nesz) in points {
+        let t = Instant::now();
+        let radar = SarConfig {
+            baseline_m,
+            noise_equivalent_sigma0_db: nesz,
+            diffuse_sigma0_db: a.diffuse_db,
+            polarisations: vec![Polarisation::HH],
+            ..SarConfig::default()
+        };
+        let spec = SuiteSpec {
+            trials: a.trials,
+            seed: a.campaign_seed,
+            pixel_range_m: [9.0, 11.0],
+            sensor: Default::default(),
+            kinds: vec![TileKind::Insar],
+            priors: vec![prior],
+            reference_pixel_m: 20.0,
+            radar,
+            polarisation: Polarisation::HH,
+            looks,
+            passes,
+            navmap: NavmapThresholds::default(),
+            budget: a.budget.budget,
+        };
+        let tag = format!(
+            "{}-{}{}-b{baseline_m}-{}",
+            scene.name,
+            looks.name(),
+            if passes > 1 {
+                format!("-x{passes}")
+            } else {
+                String::new()
+            },
+            if nesz.is_finite() {
+                format!("nesz{nesz}")
+            } else {
+                "quiet".to_string()
             }
-        }
+        );
+        let dir = a.out.join(&tag);
+        let hidden = indicatif::ProgressBar::hidden();
+        let (sr, rows) = run_scene(scene, &spec, &dir, &hidden)?;
+        let row = rows.first().context("the point ran no campaign")?;
+        let p = TradePoint {
+            scene: scene.name.clone(),
+            nesz_db: nesz.is_finite().then_some(nesz),
+            baseline_m,
+            looks,
+            passes,
+            crlb_height_m: sr.insar_crlb_height_m.unwrap_or(f64::NAN),
+            height_rmse_m: sr.insar_height_rmse_m.unwrap_or(f64::NAN),
+            slope_rmse_deg: sr.insar_slope_rmse_deg.unwrap_or(f64::NAN),
+            valid_fraction: sr.insar_valid_frac.unwrap_or(f64::NAN),
+            tile_features: row.tile_features,
+            success_rate: row.summary.success_rate,
+            false_fixes: row.summary.false_fixes,
+            pos_err_p95_m: row.summary.pos_err_p95_m,
+            seconds: t.elapsed().as_secs_f64(),
+        };
+        let line = format!(
+            "{tag:<34} height {:.2} m (CRLB {:.2}), slope {:.2}°, {} features, TRN {:.1} %, {} false",
+            p.height_rmse_m,
+            p.crlb_height_m,
+            p.slope_rmse_deg,
+            p.tile_features,
+            100.0 * p.success_rate,
+            p.false_fixes
+        );
+        pb.suspend(|| println!("{line}"));
+        pb.inc(1);
+        report.points.push(p);
     }
     pb.finish_and_clear();
     report.seconds = t0.elapsed().as_secs_f64();
@@ -257,6 +287,11 @@ fn design_label(p: &TradePoint, many_scenes: bool) -> String {
         LookDirections::One => "1 look",
         LookDirections::Both => "2 looks",
     };
+    let looks = if p.passes > 1 {
+        format!("{looks} × {} passes", p.passes)
+    } else {
+        looks.to_string()
+    };
     if many_scenes {
         format!("{} {} m {looks}", p.scene, p.baseline_m)
     } else {
@@ -280,13 +315,14 @@ pub fn table_markdown(r: &TradeReport) -> String {
             .map_or(String::new(), |d| format!("diffuse surface term {d} dB, ")),
         r.budget
     );
-    s += "| scene | looks | baseline | NESZ | CRLB | height RMSE (/CRLB) | slope RMSE | valid | tile feat. | TRN success | false | p95 |\n";
-    s += "|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+    s += "| scene | looks | passes | baseline | NESZ | CRLB | height RMSE (/CRLB) | slope RMSE | valid | tile feat. | TRN success | false | p95 |\n";
+    s += "|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
     for p in &r.points {
         s += &format!(
-            "| {} | {} | {} m | {} | {:.2} m | {:.2} m ({:.2}) | {:.2}° | {:.1} % | {} | {:.1} % | {} | {} |\n",
+            "| {} | {} | {} | {} m | {} | {:.2} m | {:.2} m ({:.2}) | {:.2}° | {:.1} % | {} | {:.1} % | {} | {} |\n",
             p.scene,
             p.looks.name(),
+            p.passes,
             p.baseline_m,
             p.nesz_db.map_or("none".to_string(), |v| format!("{v} dB")),
             p.crlb_height_m,

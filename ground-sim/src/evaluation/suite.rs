@@ -189,6 +189,8 @@ pub struct SuiteSpec {
     pub polarisation: Polarisation,
     /// Look directions of the InSAR tiles.
     pub looks: LookDirections,
+    /// Passes of one track stacked per look ([`crate::insar::InsarConfig::passes`]; 1 = one).
+    pub passes: usize,
     /// Navigability-map thresholds.
     pub navmap: NavmapThresholds,
     /// Navigator budget (flight unless asked otherwise).
@@ -314,6 +316,7 @@ pub fn run_scene(
             TileKind::Insar => {
                 let cfg = InsarConfig {
                     pixel_m: spec.reference_pixel_m,
+                    passes: spec.passes,
                     ..InsarConfig::default()
                 };
                 let run = run_from_dem_looks(
@@ -490,11 +493,11 @@ pub fn navmap_picture(m: &NavMap, slope_deg: &[f32]) -> RgbImage {
 
 /// A radar design in words for tables and reports: baseline, thermal noise, diffuse echo and
 /// look directions (e.g. "32 m baseline, NESZ -25 dB, diffuse echo -17 dB, both looks fused").
-pub fn radar_words(radar: &SarConfig, looks: LookDirections) -> String {
+pub fn radar_words(radar: &SarConfig, looks: LookDirections, passes: usize) -> String {
     let noise = radar.noise_equivalent_sigma0_db;
     let diffuse = radar.diffuse_sigma0_db;
     format!(
-        "{} m baseline, {}, {}, {}",
+        "{} m baseline, {}, {}, {}{}",
         radar.baseline_m,
         if noise.is_finite() {
             format!("NESZ {noise} dB")
@@ -509,6 +512,11 @@ pub fn radar_words(radar: &SarConfig, looks: LookDirections) -> String {
         match looks {
             LookDirections::One => "one look (east)",
             LookDirections::Both => "both looks fused",
+        },
+        if passes > 1 {
+            format!(", {passes} passes stacked per look")
+        } else {
+            String::new()
         }
     )
 }
@@ -520,7 +528,7 @@ pub fn table_markdown(r: &SuiteReport) -> String {
         r.spec.trials,
         r.spec.seed,
         r.spec.budget.label(),
-        radar_words(&r.spec.radar, r.spec.looks),
+        radar_words(&r.spec.radar, r.spec.looks, r.spec.passes),
     );
     s += concat!(
         "| scene | tile | prior | success | false | no fix (reasons) | pos p50 / p95 m | heading p95 ° | in 3σ | NEES | ms/frame | navmap go: success / agree |\n",

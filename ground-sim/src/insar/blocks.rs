@@ -26,11 +26,12 @@ use anyhow::{Context, bail, ensure};
 use serde::{Deserialize, Serialize};
 
 use super::accuracy::window_truth;
+use super::cycles::coarse_prior;
 use super::geocode::{OutputGrid, label};
 use super::geometry::PairGeometry;
 use super::pipeline::{
     CoregReport, InsarConfig, InsarProduct, LookDirections, LookFusion, MaskFractions, RadarLayers,
-    TruthOnGrid, UnwrapReport, fuse_looks, mirrored_dem, process_pair,
+    TruthOnGrid, UnwrapReport, fuse_looks, mirrored_dem, pass_noise_seed, process_stack,
 };
 use super::products::SarSummary;
 use crate::dem::{Dem, SampleKind, read_geotiff, write_geotiff};
@@ -360,18 +361,32 @@ fn run_pass(
     drop(whole);
     // The block mesh on the scene mesh's lattice when the mesh divides the DEM pixel.
     let mesh_offset = MeshOffset::for_block(p, job.sar.mesh_spacing_m, r0, c0, scene.width());
-    let opts = SimOptions {
-        progress: job.progress,
-        scene: Some(SceneFrame {
-            centre_m: centre,
-            mesh_offset,
-            noise_seed,
-        }),
-        ..SimOptions::default()
-    };
-    let pair =
-        simulate_with(&sdem, job.sar, &opts).with_context(|| format!("simulating {what}"))?;
+    // Stacked passes of the track: the block's own noise seed first, then one per pass.
+    let passes = (0..job.cfg.passes.max(1))
+        .map(|k| {
+            let opts = SimOptions {
+                progress: job.progress,
+                scene: Some(SceneFrame {
+                    centre_m: centre,
+                    mesh_offset,
+                    noise_seed,
+                }),
+                noise_seed: (k > 0).then(|| pass_noise_seed(noise_seed, k)),
+                ..SimOptions::default()
+            };
+            simulate_with(&sdem, job.sar, &opts).with_context(|| format!("simulating {what}"))
+        })
+        .collect::<anyhow::Result<Vec<_>>>()?;
     drop(sdem);
+    let pairs = passes
+        .iter()
+        .map(|p| {
+            p.slc(Antenna::A1, job.pol)
+                .zip(p.slc(Antenna::A2, job.pol))
+                .ok_or_else(|| anyhow::anyhow!("no {} SLC pair", job.pol.tag()))
+        })
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    let pair = &passes[0];
     let slc = |a: Antenna| {
         pair.slc(a, job.pol)
             .ok_or_else(|| anyhow::anyhow!("no {a:?} {} SLC", job.pol.tag()))
@@ -381,7 +396,9 @@ fn run_pass(
     let mut grid = OutputGrid::aligned(&sub_truth, &truth_grid)?;
     grid.x0_m += origin[0];
     grid.y0_m += origin[1];
-    let product = process_pair(slc(Antenna::A1)?, slc(Antenna::A2)?, &grid, job.cfg)
+    let prior = (job.cfg.prior_dem_cell_m > 0.0)
+        .then(|| coarse_prior(&truth_grid, job.cfg.prior_dem_cell_m));
+    let product = process_stack(&pairs, &grid, job.cfg, prior.as_deref())
         .with_context(|| format!("processing {what}"))?;
     let (a1, g) = (slc(Antenna::A1)?, &product.geometry);
     let n = job.cfg.window.size as f64;
@@ -391,7 +408,14 @@ fn run_pass(
     Ok(BlockPass {
         product,
         window_side_m,
-        timings: pair.timings.clone(),
+        // Every stacked pass's time; the facet counts are the track's (the same per pass).
+        timings: passes
+            .iter()
+            .skip(1)
+            .fold(pair.timings.clone(), |mut t, p| {
+                t += &p.timings;
+                t
+            }),
         facets: [pair.stats.facets, pair.stats.shadowed, pair.stats.layover],
         filled,
     })

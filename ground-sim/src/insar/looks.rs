@@ -81,6 +81,31 @@ impl Looks {
             })
             .collect()
     }
+
+    /// Add another pass's sums over the same windows (stacking passes of one track: the cross
+    /// products and powers add, so the coherence and phase are those of all samples together).
+    /// The centroid becomes the two passes' mean weighted by their window power. Returns
+    /// `false`, leaving `self` as it was, when the shapes differ.
+    pub fn add_pass(&mut self, o: &Looks) -> bool {
+        if (o.lines, o.gates, o.cross.len()) != (self.lines, self.gates, self.cross.len()) {
+            return false;
+        }
+        for i in 0..self.cross.len() {
+            let (wa, wb) = (self.power1[i] + self.power2[i], o.power1[i] + o.power2[i]);
+            if wa + wb > 0.0 {
+                let (a, b) = (self.centroid[i], o.centroid[i]);
+                self.centroid[i] = (
+                    (a.0 * wa + b.0 * wb) / (wa + wb),
+                    (a.1 * wa + b.1 * wb) / (wa + wb),
+                );
+            }
+            self.cross[i] += o.cross[i];
+            self.cross_raw[i] += o.cross_raw[i];
+            self.power1[i] += o.power1[i];
+            self.power2[i] += o.power2[i];
+        }
+        true
+    }
 }
 
 /// Complex multilook of `a1·conj(a2)` (both `lines × gates`, row-major, already coregistered)
@@ -220,6 +245,37 @@ mod tests {
         // Oversampling correlates neighbours, fewer looks than samples, at least size/over/…
         let n = equivalent_looks_1d(8, 2.0, 0.54);
         assert!(n > 2.5 && n < 5.0, "{n}");
+    }
+
+    #[test]
+    fn stacked_passes_sum_like_one_longer_window() {
+        let (lines, gates) = (13, 17);
+        let w = LookWindow::default();
+        let mk = |k: f32| -> Vec<C32> {
+            (0..lines * gates)
+                .map(|i| C32::new((i as f32 * k).sin(), (i as f32 * 0.3 * k).cos()))
+                .collect()
+        };
+        let flat: Vec<f64> = (0..gates).map(|j| 0.1 * j as f64).collect();
+        let (p1, p2, q1, q2) = (mk(0.37), mk(0.21), mk(0.53), mk(0.11));
+        let a = multilook(&p1, &p2, lines, gates, &flat, w);
+        let b = multilook(&q1, &q2, lines, gates, &flat, w);
+        let mut s = a.clone();
+        assert!(s.add_pass(&b));
+        for i in 0..s.cross.len() {
+            assert!((s.cross[i] - (a.cross[i] + b.cross[i])).norm() < 1e-9);
+            assert!((s.power1[i] - (a.power1[i] + b.power1[i])).abs() < 1e-9);
+            assert!((s.power2[i] - (a.power2[i] + b.power2[i])).abs() < 1e-9);
+            let (wa, wb) = (a.power1[i] + a.power2[i], b.power1[i] + b.power2[i]);
+            let c = (a.centroid[i].0 * wa + b.centroid[i].0 * wb) / (wa + wb);
+            assert!((s.centroid[i].0 - c).abs() < 1e-9);
+        }
+        // A pass on another grid is refused and changes nothing.
+        let other = multilook(&p1[..8 * gates], &p2[..8 * gates], 8, gates, &flat, w);
+        assert_ne!(other.lines, s.lines);
+        let before = s.cross.clone();
+        assert!(!s.add_pass(&other));
+        assert_eq!(s.cross, before);
     }
 
     #[test]

@@ -28,6 +28,7 @@
 pub mod accuracy;
 pub mod blocks;
 pub mod coreg;
+pub mod cycles;
 pub mod geocode;
 pub mod geometry;
 pub mod looks;

@@ -10,6 +10,7 @@ use serde::{Deserialize, Serialize};
 use super::coreg::{
     ResidualOffset, estimate_residual_offset, predicted_offset_gates, resample_range,
 };
+use super::cycles::{CycleChoice, CyclePrior, choose_cycles, coarse_prior};
 use super::geocode::{
     GeocodeParams, OutputGrid, RadarPixels, eq20_mask, geocode, label, ray_trace_mask,
 };
@@ -62,6 +63,16 @@ pub struct InsarConfig {
     pub azimuth_oversampling: f64,
     /// Hamming coefficient of the focusing windows (SAR default 0.54), for the looks.
     pub hamming_alpha: f64,
+    /// Cell of the coarse prior DEM that picks the unwrapped phase's whole cycles, m
+    /// ([`super::cycles`]; 0 = none: the unwrapper's datum rule alone). Default 240 m, the
+    /// scale of LOLA's global gridded topography (≈ 237 m at 128 pixels per degree); the
+    /// simulation averages the truth over such cells. It chooses cycles only, never a height.
+    pub prior_dem_cell_m: f64,
+    /// Passes of one track stacked into one interferogram per look, 1–[`MAX_PASSES`]
+    /// ([`process_stack`]; default 1). The simulation flies them over the same ground (the
+    /// same speckle: a conservative repeat of the track) with independent receiver noise; the
+    /// orbit of every pass is known exactly (no orbit error is modelled).
+    pub passes: usize,
 }
 
 impl Default for InsarConfig {
@@ -80,9 +91,14 @@ impl Default for InsarConfig {
             range_oversampling: 2.0,
             azimuth_oversampling: 2.0,
             hamming_alpha: 0.54,
+            prior_dem_cell_m: DEFAULT_PRIOR_DEM_CELL_M,
+            passes: 1,
         }
     }
 }
+
+/// Default [`InsarConfig::prior_dem_cell_m`], m.
+pub const DEFAULT_PRIOR_DEM_CELL_M: f64 = 240.0;
 
 impl InsarConfig {
     /// Take the look-relevant radar values from the SAR configuration that made the SLCs.
@@ -117,6 +133,18 @@ impl InsarConfig {
                 "pixel_m must be > 0 and min_coherence in [0, 1)".into(),
             ));
         }
+        if !(1..=MAX_PASSES).contains(&self.passes) {
+            return Err(InsarError::Input(format!(
+                "passes must be 1–{MAX_PASSES}, got {}",
+                self.passes
+            )));
+        }
+        if !(self.prior_dem_cell_m.is_finite() && self.prior_dem_cell_m >= 0.0) {
+            return Err(InsarError::Input(format!(
+                "the prior DEM's cell must be ≥ 0 m (0 = no prior), got {}",
+                self.prior_dem_cell_m
+            )));
+        }
         Ok(())
     }
 }
@@ -148,6 +176,10 @@ pub struct UnwrapReport {
     pub pixels_changed: usize,
     /// Separate regions grown.
     pub regions: usize,
+    /// Whole cycles chosen patch by patch with the coarse prior DEM (absent in reports made
+    /// before session 22).
+    #[serde(default)]
+    pub prior: CycleChoice,
 }
 
 /// Fractions of the output grid per mask code.
@@ -345,17 +377,48 @@ pub fn looks_disagree(a: f32, b: f32, sa: f32, sb: f32) -> bool {
     (f64::from(a) - f64::from(b)).abs() > FUSE_CONSISTENCY_SIGMAS * bound(sa).hypot(bound(sb))
 }
 
-/// Run the InSAR chain on `a1`, `a2` onto `grid`.
+/// Run the InSAR chain on `a1`, `a2` onto `grid`. `prior`: a coarse DEM on `grid` (heights,
+/// m, row-major) that picks the unwrapped phase's whole cycles ([`super::cycles`]); `None`
+/// leaves them to the unwrapper's datum rule.
 pub fn process_pair(
     a1: &Slc,
     a2: &Slc,
     grid: &OutputGrid,
     cfg: &InsarConfig,
+    prior: Option<&[f32]>,
+) -> InsarResult<InsarProduct> {
+    process_stack(&[(a1, a2)], grid, cfg, prior)
+}
+
+/// [`process_pair`] on several passes of one track (`(A1, A2)` per pass, the same geometry and
+/// size): each pass's interferogram is formed as in one pass and the multilook sums add
+/// ([`super::looks::Looks::add_pass`]), so the phase and coherence are estimated from all
+/// passes' samples and the CRLB counts their looks. The coregistration check and the radar
+/// layers come from the first pass.
+pub fn process_stack(
+    pairs: &[(&Slc, &Slc)],
+    grid: &OutputGrid,
+    cfg: &InsarConfig,
+    prior: Option<&[f32]>,
 ) -> InsarResult<InsarProduct> {
     let t0 = Instant::now();
     cfg.validate()?;
+    let Some(&(a1, a2)) = pairs.first() else {
+        return Err(InsarError::Input("no pass to process".into()));
+    };
     let g = PairGeometry::from_slcs(a1, a2)?;
     let (lines, gates) = (a1.lines, a1.gates);
+    for (k, &(b1, b2)) in pairs.iter().enumerate().skip(1) {
+        if (b1.lines, b1.gates, b2.lines, b2.gates) != (lines, gates, lines, gates)
+            || PairGeometry::from_slcs(b1, b2)? != g
+        {
+            return Err(InsarError::Input(format!(
+                "pass {} is not on the first pass's track (size or geometry differ): passes \
+                 stack only on one track",
+                k + 1
+            )));
+        }
+    }
     let w = cfg.window;
     if w.outputs(lines) < 2 || w.outputs(gates) < 2 {
         return Err(InsarError::Input(format!(
@@ -378,7 +441,11 @@ pub fn process_pair(
     let flat: Vec<f64> = (0..gates)
         .map(|j| g.flat_phase_rad(g.range_m(j as f64)))
         .collect();
-    let looks = multilook(&a1.data, &a2c, lines, gates, &flat, w);
+    let mut looks = multilook(&a1.data, &a2c, lines, gates, &flat, w);
+    for &(b1, b2) in &pairs[1..] {
+        let b2c = resample_range(&b2.data, lines, gates, &offset, 0.0, &kernel);
+        looks.add_pass(&multilook(&b1.data, &b2c, lines, gates, &flat, w));
+    }
     let (lo, co) = (looks.lines, looks.gates);
     let coh = looks.coherence();
     let wrapped: Vec<f64> = looks.cross.iter().map(|c| c.arg()).collect();
@@ -419,7 +486,18 @@ pub fn process_pair(
     let centre_r = g.range_m(0.5 * (gates as f64 - 1.0));
     let hoa = g.ambiguity_height_m(centre_r);
     let (unw, unwrap) = if cfg.unwrap {
-        let u = unwrap_quality_guided(&wrapped, &quality, co, lo, cfg.min_coherence as f32);
+        let mut u = unwrap_quality_guided(&wrapped, &quality, co, lo, cfg.min_coherence as f32);
+        let prior_choice = prior.map(|heights_m| {
+            let valid: Vec<bool> = labels.iter().map(|&l| l == label::VALID).collect();
+            let place = |i: usize, phase: f64| {
+                let (k, m) = (i / co, i % co);
+                let r1 = g.range_m(w.centre(m));
+                let z = g.datum_m + g.height_m(phase, r1);
+                (g.azimuth_m(w.centre(k)), g.ground_y_m(r1, z), z)
+            };
+            let p = CyclePrior { heights_m, grid };
+            choose_cycles(&mut u.phase_rad, &valid, co, &p, place)
+        });
         let good: Vec<f64> = (0..lo * co)
             .filter(|&i| labels[i] == label::VALID)
             .map(|i| u.phase_rad[i])
@@ -432,6 +510,7 @@ pub fn process_pair(
             ambiguity_height_m: hoa,
             pixels_changed: u.pixels_changed,
             regions: u.regions,
+            prior: prior_choice.unwrap_or_default(),
         };
         (u.phase_rad, rep)
     } else {
@@ -447,13 +526,16 @@ pub fn process_pair(
             ambiguity_height_m: hoa,
             pixels_changed: 0,
             regions: 0,
+            prior: CycleChoice::default(),
         };
         (wrapped.clone(), rep)
     };
 
     // 5. Heights (eq 17 with each pixel's R1 and θ1), CRLB.
+    // Stacked passes multiply the looks (their receiver noise is independent).
     let looks_eff = equivalent_looks_1d(w.size, cfg.azimuth_oversampling, cfg.hamming_alpha)
-        * equivalent_looks_1d(w.size, cfg.range_oversampling, cfg.hamming_alpha);
+        * equivalent_looks_1d(w.size, cfg.range_oversampling, cfg.hamming_alpha)
+        * pairs.len() as f64;
     let mut z = vec![0.0f64; lo * co];
     let mut sig = vec![0.0f64; lo * co];
     for k in 0..lo {
@@ -840,16 +922,32 @@ pub fn run_from_dem(
     cfg: &InsarConfig,
     progress: bool,
 ) -> anyhow::Result<ChainRun> {
+    cfg.validate()?;
     let (sdem, filled) = SarDem::from_dem(truth)?;
     let mut sar = sar.clone();
     sar.polarisations = vec![pol];
-    let opts = SimOptions {
-        progress,
-        ..SimOptions::default()
-    };
-    let pair = simulate_with(&sdem, &sar, &opts)?;
+    // Pass 0 is the configuration's own; further passes of the same track see the same ground
+    // (speckle) through their own receiver noise.
+    let passes = (0..cfg.passes.max(1))
+        .map(|k| {
+            let opts = SimOptions {
+                progress,
+                noise_seed: (k > 0).then(|| pass_noise_seed(sar.seed, k)),
+                ..SimOptions::default()
+            };
+            simulate_with(&sdem, &sar, &opts)
+        })
+        .collect::<Result<Vec<_>, _>>()?;
     let cfg = cfg.with_radar(&sar);
-    let (truth_on_grid, product) = process_simulated(truth, &pair, pol, &cfg)?;
+    let (truth_on_grid, product) = process_simulated_stack(truth, &passes, pol, &cfg)?;
+    let mut passes = passes.into_iter();
+    let mut pair = passes
+        .next()
+        .ok_or_else(|| anyhow::anyhow!("no pass simulated"))?;
+    // The run's SAR time is every pass's.
+    for other in passes {
+        pair.timings += &other.timings;
+    }
     Ok(ChainRun {
         pair,
         filled_nodata: filled,
@@ -876,12 +974,36 @@ pub fn run_from_dem_looks(
     if looks == LookDirections::One {
         return Ok(east);
     }
-    let west = run_from_dem(&mirrored_dem(truth)?, sar, pol, cfg, progress)?;
+    // The second pass draws its own noise: the mirrored scene's cells near the centre column
+    // are the same cells, and one seed would give them the same noise in both looks.
+    let west_sar = SarConfig {
+        seed: west_pass_seed(sar.seed),
+        ..sar.clone()
+    };
+    let west = run_from_dem(&mirrored_dem(truth)?, &west_sar, pol, cfg, progress)?;
     fuse_looks(&mut east.product, &west.product)?;
     // The run's SAR time is both passes' (as a map in blocks reports it).
     east.pair.timings += &west.pair.timings;
     Ok(east)
 }
+
+/// Radar seed of the west-looking pass of a one-piece two-look run whose east-looking pass
+/// uses `seed` (a map in blocks salts each block's passes alike, `blocks::run_block`).
+pub fn west_pass_seed(seed: u64) -> u64 {
+    crate::sar::scattering::splitmix64(seed ^ WEST_PASS_SALT)
+}
+
+/// Fixed salt of [`west_pass_seed`] ("west" in ASCII).
+const WEST_PASS_SALT: u64 = 0x7765_7374;
+
+/// Thermal-noise seed of pass `k` ≥ 1 of a stack whose first pass uses `seed`
+/// ([`InsarConfig::passes`]).
+pub fn pass_noise_seed(seed: u64, k: usize) -> u64 {
+    crate::sar::scattering::splitmix64(seed ^ crate::sar::scattering::splitmix64(k as u64))
+}
+
+/// Most passes one stack may hold ([`InsarConfig::passes`]).
+pub const MAX_PASSES: usize = 16;
 
 /// The scene mirrored left to right under the same georeference: what a west-looking pass of
 /// the east-looking radar sees ([`run_from_dem_looks`]).
@@ -1035,6 +1157,25 @@ pub fn process_simulated(
     process_slcs(truth, a1, a2, cfg)
 }
 
+/// [`process_simulated`] on several passes of one track, stacked ([`process_stack`]).
+pub fn process_simulated_stack(
+    truth: &Dem,
+    passes: &[InsarPair],
+    pol: Polarisation,
+    cfg: &InsarConfig,
+) -> anyhow::Result<(TruthOnGrid, InsarProduct)> {
+    let pairs = passes
+        .iter()
+        .map(|p| {
+            let a1 = p.slc(Antenna::A1, pol);
+            let a2 = p.slc(Antenna::A2, pol);
+            a1.zip(a2)
+                .ok_or_else(|| anyhow::anyhow!("no {} SLC pair in a pass", pol.tag()))
+        })
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    process_slc_stack(truth, &pairs, cfg)
+}
+
 /// The InSAR chain on two SLCs simulated from `truth` (the grid and the truth comparison come
 /// from it); returns the truth on the output grid and the product.
 pub fn process_slcs(
@@ -1043,9 +1184,23 @@ pub fn process_slcs(
     a2: &Slc,
     cfg: &InsarConfig,
 ) -> anyhow::Result<(TruthOnGrid, InsarProduct)> {
+    process_slc_stack(truth, &[(a1, a2)], cfg)
+}
+
+/// [`process_slcs`] on several passes of one track (`(A1, A2)` per pass), stacked.
+pub fn process_slc_stack(
+    truth: &Dem,
+    pairs: &[(&Slc, &Slc)],
+    cfg: &InsarConfig,
+) -> anyhow::Result<(TruthOnGrid, InsarProduct)> {
+    let &(a1, _) = pairs
+        .first()
+        .ok_or_else(|| anyhow::anyhow!("no pass to process"))?;
     let truth_grid = crate::reference::reference_dem(truth, cfg.pixel_m)?;
     let grid = OutputGrid::aligned(truth, &truth_grid)?;
-    let product = process_pair(a1, a2, &grid, cfg)?;
+    let prior =
+        (cfg.prior_dem_cell_m > 0.0).then(|| coarse_prior(&truth_grid, cfg.prior_dem_cell_m));
+    let product = process_stack(pairs, &grid, cfg, prior.as_deref())?;
     let g = &product.geometry;
     let centre_r = g.range_m(0.5 * (a1.gates as f64 - 1.0));
     let n = cfg.window.size as f64;

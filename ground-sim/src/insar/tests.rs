@@ -179,8 +179,11 @@ fn a_second_look_maps_the_wall_the_first_has_in_layover() {
     assert!(f.west_only > 0.8 * a1.eq20_layover_fraction, "{f:?}");
     assert!(a2.valid_fraction > 0.98, "valid {}", a2.valid_fraction);
     assert!(a2.valid_fraction > a1.valid_fraction + 0.1);
-    // With the wall's heights in, the map is as good as the one look on the flat parts.
-    assert!(a2.height_rmse_m < 5.0, "rmse {}", a2.height_rmse_m);
+    // With the wall's heights in, the map stays within a few metres (the wall seen at a 61°
+    // local incidence is noisier than the flat parts). Over radar seeds 1–6 the fused RMSE is
+    // 4.6–5.7 m (session 22, once each pass drew its own speckle); a wrong cycle or a missing
+    // wall would be hundreds of metres or a hole.
+    assert!(a2.height_rmse_m < 6.5, "rmse {}", a2.height_rmse_m);
     let fused_valid = both
         .product
         .labels
@@ -713,4 +716,126 @@ fn looks_that_differ_by_a_cycle_are_not_fused() {
     assert!(looks_disagree(10.0, 16.0, 0.1, 0.1));
     // A missing bound never disagrees.
     assert!(!looks_disagree(0.0, 500.0, f32::NAN, 2.0));
+}
+
+/// The Shackleton rim (3 km, seed 1) spans eight 183 m cycles of the 32 m boom with a third of
+/// the east-looking pass in layover or shadow: the unwrapper's datum rule (the valid pixels'
+/// mean nearest the datum) puts that pass a cycle low, its pixels land 375 m off on the ground,
+/// and the fused map is half valid and 180 m wrong. The coarse prior DEM (240 m cells) picks
+/// the cycles patch by patch and the map comes back (noise-free mission radar, both looks).
+#[test]
+fn a_coarse_prior_dem_picks_the_cycles_the_datum_rule_gets_wrong() {
+    use super::pipeline::{LookDirections, run_from_dem_looks};
+    use crate::terrain::{Preset, TerrainParams, Window, generate};
+    let p = TerrainParams {
+        preset: Preset::Shackleton,
+        window: Window::Rim,
+        seed: 1,
+        size_m: 3000.0,
+        pixel_m: 5.0,
+    };
+    let dem = generate(&p, &indicatif::ProgressBar::hidden()).unwrap().0;
+    let sar = SarConfig {
+        noise_equivalent_sigma0_db: f64::NEG_INFINITY,
+        ..crate::sar::RadarPreset::Mission.config()
+    };
+    let run = |prior_dem_cell_m: f64| {
+        let cfg = InsarConfig {
+            prior_dem_cell_m,
+            ..InsarConfig::default()
+        }
+        .with_radar(&sar);
+        let r = run_from_dem_looks(
+            &dem,
+            &sar,
+            Polarisation::HH,
+            &cfg,
+            false,
+            LookDirections::Both,
+        )
+        .unwrap();
+        let a = compare(&r.product, &r.truth.grid, None).unwrap();
+        eprintln!(
+            "prior {prior_dem_cell_m} m: rmse {:.2} m valid {:.4}; unwrap {:?}; looks {:?}",
+            a.height_rmse_m, a.valid_fraction, r.product.unwrap, r.product.look_fusion
+        );
+        (a, r.product.unwrap.prior)
+    };
+    let (without, c0) = run(0.0);
+    assert!(!c0.ran);
+    assert!(
+        without.height_rmse_m > 100.0 && without.valid_fraction < 0.6,
+        "the datum rule alone was expected to slip here: {without:?}"
+    );
+    let (with, c1) = run(240.0);
+    assert!(c1.ran && c1.patches_shifted >= 1, "{c1:?}");
+    assert!(c1.median_residual_m < 20.0, "{c1:?}");
+    assert!(
+        with.height_rmse_m < 2.0 && with.valid_fraction > 0.99,
+        "rmse {:.2} m valid {:.4}",
+        with.height_rmse_m,
+        with.valid_fraction
+    );
+}
+
+/// Four passes of one track: the phase comes from four times the samples, so the CRLB halves
+/// and the noise's share of the height error follows it. At NESZ −15 dB over a 1 km tilted
+/// plane (one look) the noise dominates; the noise-free run gives the error floor that
+/// stacking cannot touch (the speckle is the same ground in every pass).
+#[test]
+fn stacked_passes_shrink_the_height_error_as_the_crlb_says() {
+    let t = 8f64.to_radians().tan();
+    let dem = scene(200, 5.0, |x, y| -2000.0 + t * x + 0.5 * t * y);
+    let noisy = SarConfig {
+        noise_equivalent_sigma0_db: -15.0,
+        ..crate::sar::RadarPreset::Mission.config()
+    };
+    let quiet = SarConfig {
+        noise_equivalent_sigma0_db: f64::NEG_INFINITY,
+        ..noisy.clone()
+    };
+    let run = |sar: &SarConfig, passes: usize| {
+        let cfg = InsarConfig {
+            passes,
+            ..InsarConfig::default()
+        };
+        let r = run_from_dem(&dem, sar, Polarisation::HH, &cfg, false).unwrap();
+        let a = compare(&r.product, &r.truth.grid, None).unwrap();
+        eprintln!(
+            "{passes} passes, NESZ {}: rmse {:.3} m crlb {:.3} m valid {:.4} looks {:.1}",
+            sar.noise_equivalent_sigma0_db,
+            a.height_rmse_m,
+            a.crlb_height_m,
+            a.valid_fraction,
+            r.product.effective_looks
+        );
+        (a, r.product.effective_looks)
+    };
+    let (floor, _) = run(&quiet, 1);
+    let (one, l1) = run(&noisy, 1);
+    let (four, l4) = run(&noisy, 4);
+    assert!((l4 / l1 - 4.0).abs() < 1e-9, "{l1} {l4}");
+    let crlb_ratio = four.crlb_height_m / one.crlb_height_m;
+    assert!(
+        crlb_ratio > 0.4 && crlb_ratio < 0.6,
+        "CRLB ratio {crlb_ratio}"
+    );
+    let noise = |a: &Accuracy| {
+        (a.height_rmse_m.powi(2) - floor.height_rmse_m.powi(2))
+            .max(0.0)
+            .sqrt()
+    };
+    let ratio = noise(&four) / noise(&one);
+    assert!(
+        noise(&one) > 2.0 * floor.height_rmse_m,
+        "the noise should dominate one pass"
+    );
+    assert!(ratio > 0.35 && ratio < 0.7, "noise ratio {ratio}");
+    assert!(four.valid_fraction >= one.valid_fraction - 1e-9);
+    // Out of range: refused before anything is simulated.
+    let bad = InsarConfig {
+        passes: 0,
+        ..InsarConfig::default()
+    };
+    assert!(run_from_dem(&dem, &noisy, Polarisation::HH, &bad, false).is_err());
 }

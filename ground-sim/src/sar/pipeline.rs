@@ -46,6 +46,10 @@ pub struct SimOptions {
     /// The DEM is one block of a larger scene: place the track for that scene and draw each
     /// facet's speckle by its place in the scene's mesh (`None`: the DEM is the scene).
     pub scene: Option<SceneFrame>,
+    /// Seed of the thermal noise when it is not the configuration's (`SarConfig::seed`, which
+    /// also draws the speckle) nor a block's: another pass over the same track, whose ground
+    /// (speckle) is the same and whose receiver noise is its own.
+    pub noise_seed: Option<u64>,
 }
 
 /// Where a block sits in the scene it belongs to ([`SimOptions::scene`]).
@@ -106,6 +110,7 @@ impl Default for SimOptions {
             clutter_scale: 1.0,
             point_targets: Vec::new(),
             scene: None,
+            noise_seed: None,
         }
     }
 }
@@ -266,7 +271,11 @@ fn simulate_inner(
             EchoMethod::TimeDomain => sim.simulate_time_domain(&scat, antenna, yz)?,
         };
         if let Some(p) = raw_noise_power {
-            add_thermal_noise(&mut raw, p, opts.scene.map_or(cfg.seed, |s| s.noise_seed));
+            let seed = opts
+                .noise_seed
+                .or(opts.scene.map(|s| s.noise_seed))
+                .unwrap_or(cfg.seed);
+            add_thermal_noise(&mut raw, p, seed);
         }
         pb.finish();
         echoes_s += t.elapsed().as_secs_f64();
