@@ -352,3 +352,78 @@ fn both_look_directions_in_blocks() {
     assert!(sb < 0.9 && so < 0.9, "blocked {sb} m, one piece {so} m");
     assert!((sb - so).abs() < 0.1, "blocked {sb} m vs one piece {so} m");
 }
+
+/// Stacked passes in blocks: every block flies its passes (its own noise per pass), the block
+/// records go through `block.json` and back into the mosaic, and the map counts the passes'
+/// looks; the coarse prior DEM chose each block's cycles.
+#[test]
+fn stacked_passes_in_blocks() {
+    let dir = tempfile::tempdir().unwrap();
+    let dem = dir.path().join("dem.tif");
+    run(&[
+        "terrain",
+        "--preset",
+        "lola",
+        "--seed",
+        "3",
+        "--size-m",
+        "1600",
+        "--pixel-m",
+        "10",
+        "--out",
+        path(&dem),
+    ]);
+    let (stacked, single) = (dir.path().join("stacked"), dir.path().join("single"));
+    run(&[
+        "insar",
+        "--dem",
+        path(&dem),
+        "--out",
+        path(&stacked),
+        "--no-progress",
+        "--looks",
+        "one",
+        "--passes",
+        "2",
+        "--block-cells",
+        "40",
+        "--block-overlap-cells",
+        "8",
+    ]);
+    run(&[
+        "insar",
+        "--dem",
+        path(&dem),
+        "--out",
+        path(&single),
+        "--no-progress",
+        "--looks",
+        "one",
+        "--block-cells",
+        "0",
+    ]);
+    let read = |d: &Path| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(d.join("report.json")).unwrap()).unwrap()
+    };
+    let (s, o) = (read(&stacked), read(&single));
+    let looks = |r: &serde_json::Value| r["effective_looks"].as_f64().unwrap();
+    assert!(
+        (looks(&s) / looks(&o) - 2.0).abs() < 1e-9,
+        "{} {}",
+        looks(&s),
+        looks(&o)
+    );
+    let rmse = |r: &serde_json::Value| r["height_rmse_m"].as_f64().unwrap();
+    assert!(
+        rmse(&s) < 1.1 * rmse(&o),
+        "stacked {} vs one pass {}",
+        rmse(&s),
+        rmse(&o)
+    );
+    assert!(s["valid_fraction"].as_f64().unwrap() > 0.95, "{s}");
+    assert!(
+        s["unwrap"]["prior"]["ran"].as_bool().unwrap_or(false),
+        "{}",
+        s["unwrap"]
+    );
+}

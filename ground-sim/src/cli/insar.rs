@@ -146,6 +146,8 @@ pub fn run_chain(a: &Args) -> anyhow::Result<Outcome> {
         ..InsarConfig::default()
     }
     .with_radar(&sar);
+    // Bad parameters are refused before any simulation.
+    cfg.validate()?;
     let truth = read_geotiff(&a.dem).with_context(|| format!("reading {}", a.dem.display()))?;
     let mut ctx = RunContext {
         input_dem: Some(a.dem.clone()),

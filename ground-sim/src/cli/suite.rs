@@ -82,6 +82,14 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
     if trials == 0 {
         bail!("--trials must be ≥ 1");
     }
+    let passes = ground_sim::insar::InsarConfig {
+        passes: a.passes,
+        ..Default::default()
+    };
+    passes.validate()?;
+    if a.passes > 1 && !a.kinds.contains(&TileKind::Insar) {
+        bail!("--passes stacks the radar's passes of the InSAR tiles: give --kinds insar too");
+    }
     let shared = a.shared.is_dir().then_some(a.shared.as_path());
     if shared.is_none() {
         println!(

@@ -229,7 +229,7 @@ pub struct BlockRecord {
     pub geometry: PairGeometry,
     /// Side of the square the multilook window covers on the ground, m.
     pub window_side_m: f64,
-    /// Equivalent looks of one window.
+    /// Equivalent looks of one window, times the stacked passes.
     pub effective_looks: f64,
     /// Coregistration figures.
     pub coreg: CoregReport,

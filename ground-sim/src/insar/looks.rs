@@ -84,8 +84,10 @@ impl Looks {
 
     /// Add another pass's sums over the same windows (stacking passes of one track: the cross
     /// products and powers add, so the coherence and phase are those of all samples together).
-    /// The centroid becomes the two passes' mean weighted by their window power. Returns
-    /// `false`, leaving `self` as it was, when the shapes differ.
+    /// The centroid becomes the two passes' mean weighted by their window power (an
+    /// approximation of the `|A1·A2|` weights each centroid was taken with). Returns `false`,
+    /// leaving `self` as it was, when the shapes differ.
+    #[must_use]
     pub fn add_pass(&mut self, o: &Looks) -> bool {
         if (o.lines, o.gates, o.cross.len()) != (self.lines, self.gates, self.cross.len()) {
             return false;

@@ -120,7 +120,9 @@ impl InsarConfig {
         (window_var + filter * filter).sqrt()
     }
 
-    fn validate(&self) -> InsarResult<()> {
+    /// Check the parameters (window, pixel, coherence, passes, prior cell); the chain calls it
+    /// first, the commands before any simulation.
+    pub fn validate(&self) -> InsarResult<()> {
         let w = self.window;
         if w.size == 0 || w.step == 0 || w.step > w.size {
             return Err(InsarError::Input(format!(
@@ -256,7 +258,8 @@ pub struct InsarProduct {
     pub labels: Vec<u8>,
     /// Radar-geometry layers.
     pub radar: RadarLayers,
-    /// Equivalent independent looks of one window.
+    /// Equivalent independent looks of one window, times the stacked passes
+    /// ([`InsarConfig::passes`]).
     pub effective_looks: f64,
     /// Coregistration figures.
     pub coreg: CoregReport,
@@ -406,6 +409,16 @@ pub fn process_stack(
     let Some(&(a1, a2)) = pairs.first() else {
         return Err(InsarError::Input("no pass to process".into()));
     };
+    if let Some(p) = prior
+        && p.len() != grid.width * grid.height
+    {
+        return Err(InsarError::Input(format!(
+            "the prior DEM has {} cells, the output grid {}×{}",
+            p.len(),
+            grid.width,
+            grid.height
+        )));
+    }
     let g = PairGeometry::from_slcs(a1, a2)?;
     let (lines, gates) = (a1.lines, a1.gates);
     for (k, &(b1, b2)) in pairs.iter().enumerate().skip(1) {
@@ -444,7 +457,11 @@ pub fn process_stack(
     let mut looks = multilook(&a1.data, &a2c, lines, gates, &flat, w);
     for &(b1, b2) in &pairs[1..] {
         let b2c = resample_range(&b2.data, lines, gates, &offset, 0.0, &kernel);
-        looks.add_pass(&multilook(&b1.data, &b2c, lines, gates, &flat, w));
+        if !looks.add_pass(&multilook(&b1.data, &b2c, lines, gates, &flat, w)) {
+            return Err(InsarError::Input(
+                "a pass's multilook differs in shape from the first's".into(),
+            ));
+        }
     }
     let (lo, co) = (looks.lines, looks.gates);
     let coh = looks.coherence();
@@ -903,7 +920,7 @@ pub struct TruthOnGrid {
 /// One run of the whole chain from a DEM: SAR simulation, InSAR, grid aligned with the truth.
 #[derive(Debug, Clone)]
 pub struct ChainRun {
-    /// The SAR simulation (SLCs, geometry, timings).
+    /// The SAR simulation (SLCs and geometry of the first pass; timings of every stacked pass).
     pub pair: InsarPair,
     /// Heights filled before the SAR simulation (nodata in the input DEM).
     pub filled_nodata: usize,
@@ -974,8 +991,9 @@ pub fn run_from_dem_looks(
     if looks == LookDirections::One {
         return Ok(east);
     }
-    // The second pass draws its own noise: the mirrored scene's cells near the centre column
-    // are the same cells, and one seed would give them the same noise in both looks.
+    // The second pass draws its own seed (its speckle and its noise, as a pass from the other
+    // side would): the mirrored scene's cells near the centre column are the same cells, and one
+    // seed would give them the same noise in both looks.
     let west_sar = SarConfig {
         seed: west_pass_seed(sar.seed),
         ..sar.clone()
@@ -988,7 +1006,9 @@ pub fn run_from_dem_looks(
 }
 
 /// Radar seed of the west-looking pass of a one-piece two-look run whose east-looking pass
-/// uses `seed` (a map in blocks salts each block's passes alike, `blocks::run_block`).
+/// uses `seed`: it draws that pass's speckle and noise. (A map in blocks salts only the west
+/// pass's noise, `blocks::run_block`: its speckle is the scene mesh's, the same for every
+/// block that sees a facet.)
 pub fn west_pass_seed(seed: u64) -> u64 {
     crate::sar::scattering::splitmix64(seed ^ WEST_PASS_SALT)
 }
@@ -1043,10 +1063,11 @@ pub fn fuse_looks(east: &mut InsarProduct, west: &InsarProduct) -> anyhow::Resul
     let wc = mirror_columns(west.coherence.heights_m(), w);
     let ws = mirror_columns(west.crlb_m.heights_m(), w);
     let wl = mirror_columns(&west.labels, w);
-    // Each pass's unwrapping picks the cycle that puts its own valid mean nearest the datum;
-    // where the relief spans a cycle and the two passes see different ground (layover), they
-    // can sit whole cycles apart. Align the west pass on the east by the median whole-cycle
-    // difference of the cells both see (each cell's cycle at the west pass's own range).
+    // Each pass's cycles come from the coarse prior DEM (`cycles`), or without one from the
+    // unwrapper's datum rule; with the datum rule, where the relief spans a cycle and the two
+    // passes see different ground (layover), they can sit whole cycles apart. Align the west
+    // pass on the east by the median whole-cycle difference of the cells both see (each cell's
+    // cycle at the west pass's own range); when the prior chose both, the median is 0.
     let cycle: Vec<f64> = (0..n)
         .map(|i| cycle_height_m(west, w - 1 - i % w.max(1)))
         .collect();

@@ -71,7 +71,7 @@ pub struct InsarReport {
     pub tile_features: usize,
     /// The reference tile summary.
     pub tile: TileSummary,
-    /// Equivalent independent looks of one multilook window.
+    /// Equivalent independent looks of one multilook window, times the stacked passes.
     pub effective_looks: f64,
     /// Height of ambiguity at the scene centre, m per 2π.
     pub height_of_ambiguity_m: f64,
