@@ -92,16 +92,15 @@ fn files(dir: &Path) -> Vec<std::path::PathBuf> {
     out
 }
 
-#[test]
-fn blocks_in_separate_processes_mosaic_to_the_one_process_map() {
-    let dir = tempfile::tempdir().unwrap();
-    let dem = dir.path().join("dem.tif");
+/// A 1.6 km scene at 10 m of `preset`, terrain seed `seed`, written as `DIR/dem.tif`.
+fn scene(dir: &Path, preset: &str, seed: &str) -> std::path::PathBuf {
+    let dem = dir.join("dem.tif");
     run(&[
         "terrain",
         "--preset",
-        "lola",
+        preset,
         "--seed",
-        "5",
+        seed,
         "--size-m",
         "1600",
         "--pixel-m",
@@ -109,6 +108,18 @@ fn blocks_in_separate_processes_mosaic_to_the_one_process_map() {
         "--out",
         path(&dem),
     ]);
+    dem
+}
+
+/// `DIR/report.json` of an `insar` run.
+fn report(dir: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(dir.join("report.json")).unwrap()).unwrap()
+}
+
+#[test]
+fn blocks_in_separate_processes_mosaic_to_the_one_process_map() {
+    let dir = tempfile::tempdir().unwrap();
+    let dem = scene(dir.path(), "lola", "5");
     let (one, blocked, split) = (
         dir.path().join("one"),
         dir.path().join("blocked"),
@@ -264,20 +275,7 @@ fn blocks_in_separate_processes_mosaic_to_the_one_process_map() {
 #[test]
 fn both_look_directions_in_blocks() {
     let dir = tempfile::tempdir().unwrap();
-    let dem = dir.path().join("dem.tif");
-    run(&[
-        "terrain",
-        "--preset",
-        "shoemaker",
-        "--seed",
-        "2",
-        "--size-m",
-        "1600",
-        "--pixel-m",
-        "10",
-        "--out",
-        path(&dem),
-    ]);
+    let dem = scene(dir.path(), "shoemaker", "2");
     let (blocked, split, one) = (
         dir.path().join("blocked"),
         dir.path().join("split"),
@@ -324,10 +322,7 @@ fn both_look_directions_in_blocks() {
         "--block-cells",
         "0",
     ]);
-    let read = |d: &Path| -> serde_json::Value {
-        serde_json::from_str(&std::fs::read_to_string(d.join("report.json")).unwrap()).unwrap()
-    };
-    let (b, o) = (read(&blocked), read(&one));
+    let (b, o) = (report(&blocked), report(&one));
     let f = |v: &serde_json::Value| v.as_f64().unwrap();
     // Both passes fused in every block, as in one piece.
     assert!(f(&b["looks"]["both_valid"]) > 0.8, "{}", b["looks"]);
@@ -359,20 +354,7 @@ fn both_look_directions_in_blocks() {
 #[test]
 fn stacked_passes_in_blocks() {
     let dir = tempfile::tempdir().unwrap();
-    let dem = dir.path().join("dem.tif");
-    run(&[
-        "terrain",
-        "--preset",
-        "lola",
-        "--seed",
-        "3",
-        "--size-m",
-        "1600",
-        "--pixel-m",
-        "10",
-        "--out",
-        path(&dem),
-    ]);
+    let dem = scene(dir.path(), "lola", "3");
     let (stacked, single) = (dir.path().join("stacked"), dir.path().join("single"));
     run(&[
         "insar",
@@ -402,10 +384,7 @@ fn stacked_passes_in_blocks() {
         "--block-cells",
         "0",
     ]);
-    let read = |d: &Path| -> serde_json::Value {
-        serde_json::from_str(&std::fs::read_to_string(d.join("report.json")).unwrap()).unwrap()
-    };
-    let (s, o) = (read(&stacked), read(&single));
+    let (s, o) = (report(&stacked), report(&single));
     let looks = |r: &serde_json::Value| r["effective_looks"].as_f64().unwrap();
     assert!(
         (looks(&s) / looks(&o) - 2.0).abs() < 1e-9,

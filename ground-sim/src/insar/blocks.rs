@@ -31,7 +31,8 @@ use super::geocode::{OutputGrid, label};
 use super::geometry::PairGeometry;
 use super::pipeline::{
     CoregReport, InsarConfig, InsarProduct, LookDirections, LookFusion, MaskFractions, RadarLayers,
-    TruthOnGrid, UnwrapReport, fuse_looks, mirrored_dem, pass_noise_seed, process_stack,
+    TruthOnGrid, UnwrapReport, fuse_looks, mirrored_dem, pass_noise_seed, process_stack, slc_pairs,
+    stack_timings,
 };
 use super::products::SarSummary;
 use crate::dem::{Dem, SampleKind, read_geotiff, write_geotiff};
@@ -378,14 +379,7 @@ fn run_pass(
         })
         .collect::<anyhow::Result<Vec<_>>>()?;
     drop(sdem);
-    let pairs = passes
-        .iter()
-        .map(|p| {
-            p.slc(Antenna::A1, job.pol)
-                .zip(p.slc(Antenna::A2, job.pol))
-                .ok_or_else(|| anyhow::anyhow!("no {} SLC pair", job.pol.tag()))
-        })
-        .collect::<anyhow::Result<Vec<_>>>()?;
+    let pairs = slc_pairs(&passes, job.pol)?;
     let pair = &passes[0];
     let slc = |a: Antenna| {
         pair.slc(a, job.pol)
@@ -409,13 +403,7 @@ fn run_pass(
         product,
         window_side_m,
         // Every stacked pass's time; the facet counts are the track's (the same per pass).
-        timings: passes
-            .iter()
-            .skip(1)
-            .fold(pair.timings.clone(), |mut t, p| {
-                t += &p.timings;
-                t
-            }),
+        timings: stack_timings(&passes),
         facets: [pair.stats.facets, pair.stats.shadowed, pair.stats.layover],
         filled,
     })

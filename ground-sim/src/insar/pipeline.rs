@@ -20,7 +20,7 @@ use super::unwrap::unwrap_quality_guided;
 use super::{InsarError, InsarResult};
 use crate::dem::Dem;
 use crate::sar::kernel::SincKernel;
-use crate::sar::pipeline::{InsarPair, SimOptions, simulate_with};
+use crate::sar::pipeline::{InsarPair, SimOptions, Timings, simulate_with};
 use crate::sar::{Antenna, Polarisation, SarConfig, SarDem, Slc};
 
 /// Processing parameters. Defaults are the paper's (8×8 window, step 4, 20 m) plus our
@@ -957,14 +957,13 @@ pub fn run_from_dem(
         .collect::<Result<Vec<_>, _>>()?;
     let cfg = cfg.with_radar(&sar);
     let (truth_on_grid, product) = process_simulated_stack(truth, &passes, pol, &cfg)?;
-    let mut passes = passes.into_iter();
+    // The run's SAR time is every pass's.
+    let timings = stack_timings(&passes);
     let mut pair = passes
+        .into_iter()
         .next()
         .ok_or_else(|| anyhow::anyhow!("no pass simulated"))?;
-    // The run's SAR time is every pass's.
-    for other in passes {
-        pair.timings += &other.timings;
-    }
+    pair.timings = timings;
     Ok(ChainRun {
         pair,
         filled_nodata: filled,
@@ -1185,16 +1184,28 @@ pub fn process_simulated_stack(
     pol: Polarisation,
     cfg: &InsarConfig,
 ) -> anyhow::Result<(TruthOnGrid, InsarProduct)> {
-    let pairs = passes
+    process_slc_stack(truth, &slc_pairs(passes, pol)?, cfg)
+}
+
+/// The `(A1, A2)` SLCs of channel `pol` of every simulated pass, for [`process_stack`].
+pub fn slc_pairs(passes: &[InsarPair], pol: Polarisation) -> anyhow::Result<Vec<(&Slc, &Slc)>> {
+    passes
         .iter()
         .map(|p| {
-            let a1 = p.slc(Antenna::A1, pol);
-            let a2 = p.slc(Antenna::A2, pol);
-            a1.zip(a2)
+            p.slc(Antenna::A1, pol)
+                .zip(p.slc(Antenna::A2, pol))
                 .ok_or_else(|| anyhow::anyhow!("no {} SLC pair in a pass", pol.tag()))
         })
-        .collect::<anyhow::Result<Vec<_>>>()?;
-    process_slc_stack(truth, &pairs, cfg)
+        .collect()
+}
+
+/// The SAR time of every pass of a stack, summed (what the run reports as its SAR time).
+pub fn stack_timings(passes: &[InsarPair]) -> Timings {
+    let mut t = Timings::default();
+    for p in passes {
+        t += &p.timings;
+    }
+    t
 }
 
 /// The InSAR chain on two SLCs simulated from `truth` (the grid and the truth comparison come
