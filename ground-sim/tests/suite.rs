@@ -97,26 +97,62 @@ fn quick_suite_outputs_agree_with_each_other() {
         // The navmap score counts the same frames as its per-frame CSV.
         let nm =
             std::fs::read_to_string(out.join(scene).join(format!("{tag}-navmap.csv"))).unwrap();
-        let go: Vec<(bool, bool)> = nm
+        assert!(nm.starts_with(
+            "trial,features,valid_frac,texture_deg,go,rehearsal_success,rehearsal_go,success\n"
+        ));
+        // (footprint go, rehearsal success fraction, rehearsal go, success)
+        let go: Vec<(bool, f64, bool, bool)> = nm
             .lines()
             .skip(1)
             .map(|l| {
                 let c: Vec<&str> = l.split(',').collect();
-                (c[4] == "true", c[5] == "true")
+                (
+                    c[4] == "true",
+                    c[5].parse().unwrap(),
+                    c[6] == "true",
+                    c[7] == "true",
+                )
             })
             .collect();
         assert_eq!(go.len(), 40);
-        let n = &row["navmap"];
-        assert_eq!(
-            n["go_frames"].as_u64().unwrap() as usize,
-            go.iter().filter(|g| g.0).count()
-        );
-        assert_eq!(
-            n["go_success"].as_u64().unwrap() as usize,
-            go.iter().filter(|g| g.0 && g.1).count()
-        );
-        assert_eq!(go.iter().filter(|g| g.1).count(), ok);
-        for f in [format!("navmap-{kind}.tif"), format!("navmap-{kind}.png")] {
+        assert_eq!(go.iter().filter(|g| g.3).count(), ok);
+        for (key, pick) in [
+            (
+                "navmap",
+                (|g: &(bool, f64, bool, bool)| g.0) as fn(&_) -> bool,
+            ),
+            ("rehearsal", |g| g.2),
+        ] {
+            let n = &row[key];
+            assert_eq!(
+                n["go_frames"].as_u64().unwrap() as usize,
+                go.iter().filter(|g| pick(g)).count(),
+                "{scene} {tag} {key}"
+            );
+            assert_eq!(
+                n["go_success"].as_u64().unwrap() as usize,
+                go.iter().filter(|g| pick(g) && g.3).count(),
+                "{scene} {tag} {key}"
+            );
+        }
+        // Every campaign frame lies inside the rehearsal's sites (the same centre box), and
+        // "go" is the success fraction against the recorded threshold.
+        let min = r["spec"]["rehearsal"]["min_success"].as_f64().unwrap();
+        for g in &go {
+            assert!((0.0..=1.0).contains(&g.1), "{scene} {tag} {g:?}");
+            // (The CSV rounds the fraction to 3 decimals: skip frames at the threshold.)
+            if (g.1 - min).abs() > 1e-3 {
+                assert_eq!(g.2, g.1 >= min, "{scene} {tag} {g:?}");
+            }
+        }
+        for f in [
+            format!("navmap-{kind}.tif"),
+            format!("navmap-{kind}.png"),
+            format!("rehearsal-{tag}.tif"),
+            format!("rehearsal-{tag}.png"),
+            format!("rehearsal-{tag}-success.tif"),
+            format!("rehearsal-{tag}-sites.json"),
+        ] {
             assert!(out.join(scene).join(&f).exists(), "{scene}/{f}");
         }
     }
@@ -191,6 +227,82 @@ fn navmap_footprint_sums_match_a_brute_force_count() {
     assert!(m.go_fraction() >= strict.go_fraction());
 }
 
+/// `navmap` by rehearsal from a reference folder alone: high on a cratered plain's truth-built
+/// tile, nothing on a featureless one (both with the quick suite's 120-px frames on 3 km maps
+/// and a 50 m prior, the mode in which such small frames fix on the plain: the quick suite's
+/// campaign there gets 100 %, 55 % without the prior).
+#[test]
+fn navmap_rehearsal_tells_textured_from_featureless_ground() {
+    use ground_sim::dem::{Dem, GeoRef, write_geotiff};
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("suite");
+    run(&[
+        "suite",
+        "--quick",
+        "--scenes",
+        "lola",
+        "--kinds",
+        "truth",
+        "--prior-sigma-m",
+        "0",
+        "--rehearsal-step-m",
+        "0",
+        "--out",
+        path(&out),
+    ]);
+    // The quick size without rehearsal: the suite writes none.
+    assert!(
+        !out.join("lola")
+            .join("rehearsal-truth-noprior.tif")
+            .exists()
+    );
+    let flat = Dem::new(
+        600,
+        600,
+        vec![-2000.0f32; 600 * 600],
+        GeoRef::local(0.0, 3000.0, 5.0, "flat"),
+    )
+    .unwrap();
+    let flat_tif = dir.path().join("flat.tif");
+    write_geotiff(&flat, &flat_tif, None).unwrap();
+    let flat_ref = dir.path().join("flat");
+    run(&["tile", "--dem", path(&flat_tif), "--out", path(&flat_ref)]);
+    for (reference, lo, hi) in [
+        (out.join("lola").join("truth"), 0.8, 1.0),
+        (flat_ref, 0.0, 0.0),
+    ] {
+        let nm = dir.path().join("nm");
+        let text = run(&[
+            "navmap",
+            "--tile",
+            path(&reference),
+            "--out",
+            path(&nm),
+            "--size-px",
+            "120",
+            "--step-m",
+            "250",
+            "--frames-per-site",
+            "4",
+            "--prior-sigma-m",
+            "50",
+        ]);
+        assert!(text.contains("rehearsal (prior 50 m, 2°)"), "{text}");
+        let j = json(&nm.join("navmap.json"));
+        let go = j["go_fraction"].as_f64().unwrap();
+        assert!((lo..=hi).contains(&go), "{}: go {go}", reference.display());
+        assert_eq!(j["frames"].as_u64(), Some(4 * j["sites"].as_u64().unwrap()));
+        for f in [
+            "navmap.tif",
+            "navmap-success.tif",
+            "navmap.png",
+            "navmap-sites.json",
+        ] {
+            assert!(nm.join(f).exists(), "{f}");
+        }
+    }
+}
+
 #[test]
 fn suite_and_navmap_refuse_bad_input_clearly() {
     let out = ground_sim(&["suite", "--quick", "--scenes", "nowhere", "--out", "/tmp/x"]);
@@ -207,6 +319,37 @@ fn suite_and_navmap_refuse_bad_input_clearly() {
     ]);
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("tile.bin"));
+    // A reference folder without its DEM: the rehearsal says what it needs.
+    let flat = ground_sim::dem::Dem::new(
+        200,
+        200,
+        vec![0.0f32; 200 * 200],
+        ground_sim::dem::GeoRef::local(0.0, 1000.0, 5.0, "flat"),
+    )
+    .unwrap();
+    let tif = dir.path().join("flat.tif");
+    ground_sim::dem::write_geotiff(&flat, &tif, None).unwrap();
+    let r = dir.path().join("ref");
+    run(&["tile", "--dem", path(&tif), "--out", path(&r)]);
+    std::fs::remove_file(r.join("reference-dem.tif")).unwrap();
+    let out = ground_sim(&["navmap", "--tile", path(&r), "--out", path(dir.path())]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("reference-dem.tif is missing"), "{err}");
+    let out = ground_sim(&[
+        "navmap",
+        "--tile",
+        path(&r),
+        "--out",
+        path(dir.path()),
+        "--method",
+        "footprint",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
 }
 
 #[test]

@@ -105,8 +105,8 @@ fn suite_section(
     std::fs::create_dir_all(&a.img)?;
     std::fs::copy(dir.join("suite.png"), a.img.join("suite.png"))?;
     std::fs::copy(
-        dir.join("plains").join("navmap-truth.png"),
-        a.img.join("navmap-plains-truth.png"),
+        dir.join("fresh-rim").join("rehearsal-truth-noprior.png"),
+        a.img.join("navmap-fresh-rim-truth.png"),
     )?;
     let img = |f: &str| {
         let rel = a.out.parent().and_then(|p| a.img.strip_prefix(p).ok());
@@ -120,8 +120,10 @@ fn suite_section(
         "Every scene 4 km × 4 km at 5 m (terrain seed {seed}; `terrain --preset NAME --window W --seed {seed}`), \
          tiles at 20 m from the truth DEM and from the InSAR chain (the default radar, as the line above the table states), \
          frames 200 px at 9–11 m with any heading, without and with a prior (σ 50 m, heading σ 2°, scale σ 2 %, drawn around the truth). \
-         \"navmap go\" scores the navigability map (`ground-sim navmap`, from the tile alone): the success rate of the frames it \
-         called \"go\" and the fraction of frames whose outcome it predicted. The whole suite took {:.0} s on this 2-core machine.\n",
+         The two \"navmap\" columns score the navigability maps (`ground-sim navmap`, from the reference folder alone; docs/navmap.md) against the campaign's frames: \
+         the success rate of the frames each called \"go\" and the fraction of frames whose outcome it predicted. The footprint rule reads tile features, valid reference and slope texture under the frame; \
+         the rehearsal (the default) flies the flight code against the tile beforehand, in the campaign's prior mode, with frames from the reference DEM plus a draw of the map's own reported error. \
+         The whole suite took {:.0} s on this 2-core machine.\n",
         report["seconds"].as_f64().unwrap_or(f64::NAN)
     )?;
     writeln!(md, "![suite]({})\n", img("suite.png"))?;
@@ -145,8 +147,8 @@ fn suite_section(
     }
     writeln!(
         md,
-        "\nThe navigability map of the plains against their truth-built tile (green go, red no-go; grey: a frame centred there would leave the map):\n\n![navmap]({})\n",
-        img("navmap-plains-truth.png")
+        "\nThe navigability map by rehearsal of the fresh crater's rim against its truth-built tile, lost in space (green go, red no-go; grey: a frame centred there would leave the map; the crater's bowl is the bright disc):\n\n![navmap]({})\n",
+        img("navmap-fresh-rim-truth.png")
     )?;
     // The same suite on other terrain and frames: nothing above may hold for one seed only.
     let seed2 = (a.seed + 1).to_string();
@@ -184,6 +186,9 @@ fn suite_section(
         "insar",
         "--radar",
         "paper",
+        // Only its success rates are shown: no navigability maps.
+        "--rehearsal-step-m",
+        "0",
     ])?;
     let report_paper = read(&dir_paper.join("suite.json"))?;
     writeln!(
@@ -203,27 +208,33 @@ fn suite_section(
     md.push_str(&success_rows(&report_paper, &all_cols[2..]));
     writeln!(
         md,
-        "\nThe navigability map over all campaigns of each seed (frames called \"go\": how many, how many got a correct fix; agreement = outcomes predicted right):\n\n| seed | tile | go frames | go success | agreement |\n|---|---|---|---|---|"
+        "\nThe navigability maps over all campaigns of each seed (frames called \"go\": how many, how many got a correct fix; agreement = outcomes predicted right). The footprint rule reads feature count, valid fraction and slope texture under the frame; the rehearsal flies the flight code against the reference from its own DEM plus a draw of its reported error, in the campaign's prior mode (`ground_sim::evaluation::rehearsal`):\n\n| seed | tile | map | go frames | go success | agreement |\n|---|---|---|---|---|---|"
     )?;
     for (sd, rep) in [(&seed, &report), (&seed2, &report2)] {
-        for kind in ["truth", "insar"] {
+        for (kind, (key, method)) in ["truth", "insar"]
+            .into_iter()
+            .flat_map(|k| [("navmap", "footprint"), ("rehearsal", "rehearsal")].map(|m| (k, m)))
+        {
             let (mut go_n, mut go_ok, mut right, mut n) = (0u64, 0u64, 0u64, 0u64);
             for r in rep["rows"]
                 .as_array()
                 .into_iter()
                 .flatten()
-                .filter(|r| r["kind"] == kind)
+                .filter(|r| r["kind"] == kind && !r[key].is_null())
             {
-                let m = &r["navmap"];
+                let m = &r[key];
                 let g = |k: &str| m[k].as_u64().unwrap_or(0);
                 go_n += g("go_frames");
                 go_ok += g("go_success");
                 right += g("go_success") + g("nogo_frames") - g("nogo_success");
                 n += g("go_frames") + g("nogo_frames");
             }
+            if n == 0 {
+                continue;
+            }
             writeln!(
                 md,
-                "| {sd} | {kind} | {go_n} | {:.1} % | {:.1} % |",
+                "| {sd} | {kind} | {method} | {go_n} | {:.1} % | {:.1} % |",
                 100.0 * go_ok as f64 / go_n.max(1) as f64,
                 100.0 * right as f64 / n.max(1) as f64
             )?;

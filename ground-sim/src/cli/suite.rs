@@ -8,6 +8,7 @@ use std::time::Instant;
 use anyhow::bail;
 use ground_sim::evaluation::campaign::PriorSpec;
 use ground_sim::evaluation::navmap::NavmapThresholds;
+use ground_sim::evaluation::rehearsal::{REHEARSAL_FRAMES, REHEARSAL_STEP_M, RehearsalSpec};
 use ground_sim::evaluation::suite::{
     SHARED_DATA_DIR, SuiteReport, SuiteSpec, TileKind, default_scenes, run_scene, suite_picture,
     table_markdown,
@@ -33,7 +34,8 @@ pub struct Args {
     /// Side of every scene, metres.
     #[arg(long, default_value_t = 4000.0)]
     pub size_m: f64,
-    /// CI size: 3 km scenes, 120-px frames, 40 frames per campaign (overrides those flags).
+    /// CI size: 3 km scenes, 120-px frames, 40 frames per campaign, rehearsal sites 250 m apart
+    /// (overrides those flags).
     #[arg(long)]
     pub quick: bool,
     /// Only these scenes (names as in the table; default all).
@@ -66,6 +68,13 @@ pub struct Args {
     /// independent per pass, the same ground; each pass adds its SAR time).
     #[arg(long, default_value_t = 1)]
     pub passes: usize,
+    /// Spacing of the navigability map's rehearsal sites, metres (0: no rehearsal, the
+    /// footprint rule only).
+    #[arg(long, default_value_t = REHEARSAL_STEP_M)]
+    pub rehearsal_step_m: f64,
+    /// Rehearsal frames per site.
+    #[arg(long, default_value_t = REHEARSAL_FRAMES)]
+    pub rehearsal_frames: usize,
     /// The navigator budget.
     #[command(flatten)]
     pub budget: super::BudgetArgs,
@@ -74,10 +83,13 @@ pub struct Args {
 /// Run `ground-sim suite`.
 pub fn run(a: &Args) -> anyhow::Result<()> {
     let t0 = Instant::now();
-    let (trials, size_m, size_px) = if a.quick {
-        (40, 3000.0, 120)
+    let (trials, size_m, size_px, rehearsal_step_m) = if a.quick {
+        {
+            let step = if a.rehearsal_step_m > 0.0 { 250.0 } else { 0.0 };
+            (40, 3000.0, 120, step)
+        }
     } else {
-        (a.trials, a.size_m, a.size_px)
+        (a.trials, a.size_m, a.size_px, a.rehearsal_step_m)
     };
     if trials == 0 {
         bail!("--trials must be ≥ 1");
@@ -134,6 +146,12 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         looks: super::insar::looks_or_preset(a.looks, &a.radar),
         passes: a.passes,
         navmap: NavmapThresholds::default(),
+        rehearsal: (rehearsal_step_m > 0.0).then(|| RehearsalSpec {
+            step_m: rehearsal_step_m,
+            frames_per_site: a.rehearsal_frames,
+            seed: a.campaign_seed,
+            ..RehearsalSpec::default()
+        }),
         budget: a.budget.budget,
     };
     let n_campaigns = scenes.len() * spec.kinds.len() * spec.priors.len();

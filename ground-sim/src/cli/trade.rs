@@ -214,6 +214,7 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
             looks,
             passes,
             navmap: NavmapThresholds::default(),
+            rehearsal: None,
             budget: a.budget.budget,
         };
         let tag = format!(

@@ -6,6 +6,7 @@ pub mod campaign;
 pub mod descent;
 pub mod navmap;
 pub mod register;
+pub mod rehearsal;
 pub mod shard;
 pub mod suite;
 pub mod trn;

@@ -17,6 +17,7 @@ use crate::evaluation::campaign::{
     CampaignSpec, EvalSummary, PriorSpec, percentile, run_campaign, summarize, write_csv,
 };
 use crate::evaluation::navmap::{NavMap, NavmapScore, NavmapThresholds};
+use crate::evaluation::rehearsal::{ErrorModel, Rehearsal, RehearsalSpec, rehearse};
 use crate::flyer::frames::SensorModel;
 use crate::flyer::onboard::Budget;
 use crate::insar::InsarConfig;
@@ -191,8 +192,10 @@ pub struct SuiteSpec {
     pub looks: LookDirections,
     /// Passes of one track stacked per look ([`crate::insar::InsarConfig::passes`]; 1 = one).
     pub passes: usize,
-    /// Navigability-map thresholds.
+    /// Navigability-map thresholds (the footprint rule).
     pub navmap: NavmapThresholds,
+    /// The navigability map by rehearsal, per campaign's prior mode (`None`: not flown).
+    pub rehearsal: Option<RehearsalSpec>,
     /// Navigator budget (flight unless asked otherwise).
     pub budget: Budget,
 }
@@ -208,10 +211,16 @@ pub struct SuiteRow {
     pub tile_features: usize,
     /// The campaign's summary (the prior is in it).
     pub summary: EvalSummary,
-    /// The navigability map against the campaign's outcomes.
+    /// The navigability map (footprint rule) against the campaign's outcomes.
     pub navmap: NavmapScore,
-    /// Fraction of the tile's in-map cells predicted "go".
+    /// Fraction of the tile's in-map cells the footprint rule predicted "go".
     pub navmap_go_fraction: f64,
+    /// The navigability map by rehearsal (in the campaign's prior mode) against the outcomes.
+    pub rehearsal: Option<NavmapScore>,
+    /// Fraction of rehearsal sites predicted "go".
+    pub rehearsal_go_fraction: Option<f64>,
+    /// Rehearsal frames flown for this campaign's map.
+    pub rehearsal_frames: Option<usize>,
 }
 
 /// What one scene gave beyond its campaigns.
@@ -375,19 +384,55 @@ pub fn run_scene(
             let summary = summarize(&scores, &cspec);
             write_csv(&dir.join(format!("{tag}.csv")), &scores)?;
             crate::write_json(&dir.join(format!("{tag}.json")), &summary)?;
+            // The rehearsal flies the campaign's own mode (sensor, pixels, prior, budget) from
+            // the reference folder alone: its DEM and, for an InSAR map, its height error.
+            let rehearsal = match &spec.rehearsal {
+                Some(r) => {
+                    progress.set_message(format!("{}: {tag} rehearsal", scene.name));
+                    let rdem = read_geotiff(&tdir.join(crate::reference::DEM_FILE))?;
+                    let error = ErrorModel::load(&tdir)?;
+                    let reh = rehearse(
+                        tile,
+                        NavConfig::default(),
+                        &rdem,
+                        &error,
+                        &cspec,
+                        r,
+                        &ProgressBar::hidden(),
+                    )?;
+                    write_rehearsal(
+                        &reh,
+                        &tile,
+                        reference.slope.as_ref(),
+                        &dir.join(format!("rehearsal-{tag}")),
+                    )?;
+                    Some(reh)
+                }
+                None => None,
+            };
             let h = tile.header();
             let mut nm = NavmapScore::default();
-            // Per frame: what the map read at the true centre, what it predicted, what happened.
-            let mut csv = String::from("trial,features,valid_frac,texture_deg,go,success\n");
+            let mut rm = NavmapScore::default();
+            // Per frame: what the maps read at the true centre, what they predicted, what
+            // happened.
+            let mut csv = String::from(
+                "trial,features,valid_frac,texture_deg,go,rehearsal_success,rehearsal_go,success\n",
+            );
             for (i, s) in scores.iter().enumerate() {
                 let Some(t) = s.truth else { continue };
                 let x = (t.x_m - h.origin_x_m) / h.pixel_x_m;
                 let y = (t.y_m - h.origin_y_m) / h.pixel_y_m;
                 let (go, ok) = (navmap.go_at(x, y), s.fix && !s.false_fix);
                 nm.add(go, ok);
+                let (rp, rgo) = rehearsal.as_ref().map_or((f64::NAN, false), |r| {
+                    (r.success_at(t.x_m, t.y_m), r.go_at(t.x_m, t.y_m))
+                });
+                if rehearsal.is_some() {
+                    rm.add(rgo, ok);
+                }
                 if let Some(c) = navmap.cell_at(x, y) {
                     csv += &format!(
-                        "{i},{},{:.4},{:.3},{go},{ok}\n",
+                        "{i},{},{:.4},{:.3},{go},{rp:.3},{rgo},{ok}\n",
                         navmap.features[c], navmap.valid_frac[c], navmap.texture_deg[c]
                     );
                 }
@@ -401,6 +446,9 @@ pub fn run_scene(
                 summary,
                 navmap: nm,
                 navmap_go_fraction: navmap.go_fraction(),
+                rehearsal: rehearsal.as_ref().map(|_| rm),
+                rehearsal_go_fraction: rehearsal.as_ref().map(Rehearsal::go_fraction),
+                rehearsal_frames: rehearsal.as_ref().map(|r| r.frames),
             });
             progress.inc(1);
         }
@@ -446,22 +494,42 @@ pub fn write_navmap(m: &NavMap, grid: Option<&Dem>, stem: &Path) -> anyhow::Resu
 /// The navigability map over the reference slope (grey, 0–30°): go green, no-go red, cells
 /// whose frame would leave the map left grey.
 pub fn navmap_picture(m: &NavMap, slope_deg: &[f32]) -> RgbImage {
-    let mag = (600 / m.width.max(m.height).max(1)).max(1) as u32;
-    let (w, h) = (m.width as u32 * mag, m.height as u32 * mag + 2 * GLYPH + 8);
+    go_picture(
+        &m.go_layer(),
+        m.width,
+        m.height,
+        slope_deg,
+        &format!("navmap: go {:.0} %", 100.0 * m.go_fraction()),
+    )
+}
+
+/// A go layer (1 go, 0 no-go, NaN off the map; `width` × `height`, row-major) over the
+/// reference slope (grey, 0–30°): go tinted green, no-go red, off-map left grey; `title` under
+/// it.
+pub fn go_picture(
+    go: &[f32],
+    width: usize,
+    height: usize,
+    slope_deg: &[f32],
+    title: &str,
+) -> RgbImage {
+    let mag = (600 / width.max(height).max(1)).max(1) as u32;
+    let (w, h) = (width as u32 * mag, height as u32 * mag + 2 * GLYPH + 8);
     let mut img = RgbImage::from_pixel(w, h, Rgb([255, 255, 255]));
-    for r in 0..m.height {
-        for c in 0..m.width {
-            let i = r * m.width + c;
+    for r in 0..height {
+        for c in 0..width {
+            let i = r * width + c;
             let s = slope_deg.get(i).copied().unwrap_or(f32::NAN);
             let g = if s.is_finite() {
                 (s / 30.0).clamp(0.0, 1.0) * 200.0 + 40.0
             } else {
                 20.0
             };
+            let v = go.get(i).copied().unwrap_or(f32::NAN);
             // Tinted, not painted over: the terrain under a go or no-go cell stays visible.
-            let px = if !m.inside[i] {
+            let px = if !v.is_finite() {
                 [g as u8; 3]
-            } else if m.go(i) {
+            } else if v >= 0.5 {
                 [(0.7 * g) as u8, (0.7 * g + 75.0) as u8, (0.7 * g) as u8]
             } else {
                 [(0.7 * g + 75.0) as u8, (0.7 * g) as u8, (0.7 * g) as u8]
@@ -473,14 +541,8 @@ pub fn navmap_picture(m: &NavMap, slope_deg: &[f32]) -> RgbImage {
             }
         }
     }
-    let y = m.height as u32 * mag + 4;
-    draw_text(
-        &mut img,
-        4,
-        y,
-        &format!("navmap: go {:.0} %", 100.0 * m.go_fraction()),
-        [0, 0, 0],
-    );
+    let y = height as u32 * mag + 4;
+    draw_text(&mut img, 4, y, title, [0, 0, 0]);
     draw_text(
         &mut img,
         4,
@@ -489,6 +551,50 @@ pub fn navmap_picture(m: &NavMap, slope_deg: &[f32]) -> RgbImage {
         [60, 60, 60],
     );
     img
+}
+
+/// Write a rehearsal on the tile's grid: `<stem>.tif` (1 go, 0 no-go, NaN where a frame leaves
+/// the map), `<stem>-success.tif` (interpolated success fraction), `<stem>.png` (over the
+/// reference slope `grid`, which gives the georeference) and `<stem>-sites.json` (the sites).
+pub fn write_rehearsal(
+    r: &Rehearsal,
+    tile: &Tile<'_>,
+    grid: Option<&Dem>,
+    stem: &Path,
+) -> anyhow::Result<()> {
+    let h = tile.header();
+    let (w, hh) = (h.width_px as usize, h.height_px as usize);
+    let Some(grid) = grid.filter(|g| g.width() == w && g.height() == hh) else {
+        anyhow::bail!("the reference folder has no slope.tif on the tile's grid");
+    };
+    let name = |suffix: &str| {
+        let mut s = stem.as_os_str().to_owned();
+        s.push(suffix);
+        PathBuf::from(s)
+    };
+    let with = |v: Vec<f32>| {
+        let mut d = grid.clone();
+        d.heights_m_mut().copy_from_slice(&v);
+        d
+    };
+    let go = r.go_layer(tile);
+    write_geotiff(&with(go.clone()), &name(".tif"), None)?;
+    write_geotiff(&with(r.success_layer(tile)), &name("-success.tif"), None)?;
+    go_picture(
+        &go,
+        w,
+        hh,
+        grid.heights_m(),
+        &format!(
+            "rehearsal: go {:.0} % of {} sites",
+            100.0 * r.go_fraction(),
+            r.nx * r.ny
+        ),
+    )
+    .save(name(".png"))
+    .with_context(|| format!("writing {}", name(".png").display()))?;
+    crate::write_json(&name("-sites.json"), r)?;
+    Ok(())
 }
 
 /// A radar design in words for tables and reports: baseline, thermal noise, diffuse echo and
@@ -521,6 +627,20 @@ pub fn radar_words(radar: &SarConfig, looks: LookDirections, passes: usize) -> S
     )
 }
 
+/// A navigability map's score as a table cell: "success of the go frames / agreement".
+fn go_cell(score: Option<&NavmapScore>) -> String {
+    match score {
+        None => "–".into(),
+        Some(m) if m.go_frames > 0 => format!(
+            "{:.1} % of {} / {:.0} %",
+            100.0 * m.go_success_rate(),
+            m.go_frames,
+            100.0 * m.agreement()
+        ),
+        Some(m) => format!("no go frame / {:.0} %", 100.0 * m.agreement()),
+    }
+}
+
 /// The suite's table as Markdown: one row per campaign.
 pub fn table_markdown(r: &SuiteReport) -> String {
     let mut s = format!(
@@ -531,8 +651,8 @@ pub fn table_markdown(r: &SuiteReport) -> String {
         radar_words(&r.spec.radar, r.spec.looks, r.spec.passes),
     );
     s += concat!(
-        "| scene | tile | prior | success | false | no fix (reasons) | pos p50 / p95 m | heading p95 ° | in 3σ | NEES | ms/frame | navmap go: success / agree |\n",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+        "| scene | tile | prior | success | false | no fix (reasons) | pos p50 / p95 m | heading p95 ° | in 3σ | NEES | ms/frame | navmap (footprint) go: success / agree | navmap (rehearsal) go: success / agree |\n",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for row in &r.rows {
         let e = &row.summary;
@@ -549,7 +669,7 @@ pub fn table_markdown(r: &SuiteReport) -> String {
             }
         };
         s += &format!(
-            "| {} | {} ({} feat.) | {} | {:.1} % | {} | {:.1} % {} | {} / {} | {} | {} | {} | {:.2} | {} / {:.0} % |\n",
+            "| {} | {} ({} feat.) | {} | {:.1} % | {} | {:.1} % {} | {} / {} | {} | {} | {} | {:.2} | {} | {} |\n",
             row.scene,
             row.kind.name(),
             row.tile_features,
@@ -575,16 +695,8 @@ pub fn table_markdown(r: &SuiteReport) -> String {
             },
             f(e.nees_mean, 2),
             e.time_ms_mean,
-            if row.navmap.go_frames > 0 {
-                format!(
-                    "{:.1} % of {}",
-                    100.0 * row.navmap.go_success_rate(),
-                    row.navmap.go_frames
-                )
-            } else {
-                "no go frame".into()
-            },
-            100.0 * row.navmap.agreement()
+            go_cell(Some(&row.navmap)),
+            go_cell(row.rehearsal.as_ref()),
         );
     }
     s

@@ -168,7 +168,7 @@ impl SarDem {
 /// Fill non-finite heights in place from their finite 4-neighbours, layer by layer (each pass
 /// gives every hole touching filled pixels the mean of those neighbours). Returns the count
 /// filled; an all-nodata grid is an error.
-fn fill_nodata(z: &mut [f32], w: usize, h: usize) -> SarResult<usize> {
+pub(crate) fn fill_nodata(z: &mut [f32], w: usize, h: usize) -> SarResult<usize> {
     let holes = z.iter().filter(|v| !v.is_finite()).count();
     if holes == 0 {
         return Ok(0);
