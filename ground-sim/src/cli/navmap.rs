@@ -32,7 +32,8 @@ pub enum Method {
 /// Arguments of `ground-sim navmap`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// Reference folder (tile.bin with its slope raster, slope.tif for the georeference).
+    /// Reference folder: tile.bin with its slope raster, slope.tif for the georeference; the
+    /// rehearsal also reads reference-dem.tif, tile.json and, when present, height-crlb.tif.
     #[arg(long)]
     pub tile: PathBuf,
     /// Output folder: navmap.tif (1 go, 0 no-go, NaN where a frame would leave the map),
@@ -170,6 +171,12 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
                      (`--method footprint` needs only the tile)",
                     dem_path.display()
                 );
+            }
+            // Checked before flying: the pictures need the tile's grid.
+            if !reference.slope.as_ref().is_some_and(|g| {
+                g.width() == h.width_px as usize && g.height() == h.height_px as usize
+            }) {
+                anyhow::bail!("{} has no slope.tif on the tile's grid", a.tile.display());
             }
             let dem = read_geotiff(&dem_path)?;
             let error = ErrorModel::load(&a.tile)?;

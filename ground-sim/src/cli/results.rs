@@ -240,6 +240,115 @@ fn suite_section(
             )?;
         }
     }
+    // The rehearsal as a forecast: its mean predicted chance over a campaign's frames against the
+    // campaign's success rate, and its calibration frame by frame.
+    writeln!(
+        md,
+        "\nThe rehearsal as a forecast of each campaign's success rate (its predicted chance averaged over the campaign's frame centres), per seed and tile kind over the 18 campaigns:\n\n| seed | tile | mean predicted − flown | largest \\|predicted − flown\\| | campaign |\n|---|---|---|---|---|"
+    )?;
+    for (sd, rep) in [(&seed, &report), (&seed2, &report2)] {
+        for kind in ["truth", "insar"] {
+            let diffs: Vec<(f64, String)> = rep["rows"]
+                .as_array()
+                .into_iter()
+                .flatten()
+                .filter(|r| r["kind"] == kind)
+                .filter_map(|r| {
+                    let p = r["rehearsal_predicted_success"].as_f64()?;
+                    let f = r["summary"]["success_rate"].as_f64()?;
+                    let mode = if r["summary"]["prior"].is_null() {
+                        "no prior"
+                    } else {
+                        "prior"
+                    };
+                    Some((
+                        p - f,
+                        format!("{}, {mode}", r["scene"].as_str().unwrap_or("?")),
+                    ))
+                })
+                .collect();
+            let Some(worst) = diffs.iter().max_by(|a, b| a.0.abs().total_cmp(&b.0.abs())) else {
+                continue;
+            };
+            writeln!(
+                md,
+                "| {sd} | {kind} | {:+.1} points | {:.1} points | {} |",
+                100.0 * diffs.iter().map(|d| d.0).sum::<f64>() / diffs.len() as f64,
+                100.0 * worst.0.abs(),
+                worst.1
+            )?;
+        }
+    }
+    writeln!(
+        md,
+        "\nCalibration over both seeds, every scene and prior mode: frames binned by the rehearsal's predicted chance at their centre, against how many of them fixed:\n\n| predicted | truth: frames | mean predicted | fixed | InSAR: frames | mean predicted | fixed |\n|---|---|---|---|---|---|---|"
+    )?;
+    let bins = [
+        "0–0.125",
+        "0.125–0.375",
+        "0.375–0.625",
+        "0.625–0.875",
+        "0.875–1 (not 1)",
+        "1",
+    ];
+    let mut cal = [[(0u64, 0.0f64, 0u64); 6]; 2];
+    for (dir_s, rep) in [(&dir, &report), (&dir2, &report2)] {
+        for r in rep["rows"].as_array().into_iter().flatten() {
+            if r["rehearsal"].is_null() {
+                continue;
+            }
+            let kind = r["kind"].as_str().unwrap_or("?");
+            let k = usize::from(kind == "insar");
+            let prior = &r["summary"]["prior"];
+            let tag = if prior.is_null() {
+                "noprior".to_string()
+            } else {
+                format!(
+                    "prior{}m{}deg",
+                    prior["sigma_m"].as_f64().unwrap_or(f64::NAN),
+                    prior["heading_sigma_deg"].as_f64().unwrap_or(f64::NAN)
+                )
+            };
+            let p = dir_s
+                .join(r["scene"].as_str().unwrap_or("?"))
+                .join(format!("{kind}-{tag}-navmap.csv"));
+            let text =
+                std::fs::read_to_string(&p).with_context(|| format!("reading {}", p.display()))?;
+            for line in text.lines().skip(1) {
+                let c: Vec<&str> = line.split(',').collect();
+                let (Some(pr), Some(ok)) = (c.get(5), c.get(7)) else {
+                    continue;
+                };
+                let Ok(pr) = pr.parse::<f64>() else { continue };
+                if !pr.is_finite() {
+                    continue;
+                }
+                let b = match pr {
+                    x if x < 0.125 => 0,
+                    x if x < 0.375 => 1,
+                    x if x < 0.625 => 2,
+                    x if x < 0.875 => 3,
+                    x if x < 0.9995 => 4,
+                    _ => 5,
+                };
+                let e = &mut cal[k][b];
+                e.0 += 1;
+                e.1 += pr;
+                e.2 += u64::from(*ok == "true");
+            }
+        }
+    }
+    for (b, label) in bins.iter().enumerate() {
+        let cell = |k: usize| {
+            let (n, sp, ok) = cal[k][b];
+            if n == 0 {
+                "0 | – | –".to_string()
+            } else {
+                format!("{n} | {:.2} | {:.3}", sp / n as f64, ok as f64 / n as f64)
+            }
+        };
+        writeln!(md, "| {label} | {} | {} |", cell(0), cell(1))?;
+    }
     writeln!(md)?;
     Ok(())
 }

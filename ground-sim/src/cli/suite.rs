@@ -85,7 +85,17 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
     let t0 = Instant::now();
     let (trials, size_m, size_px, rehearsal_step_m) = if a.quick {
         {
-            let step = if a.rehearsal_step_m > 0.0 { 250.0 } else { 0.0 };
+            let step = if a.rehearsal_step_m == 0.0 {
+                0.0
+            } else {
+                // What was asked must make sense even where the quick size overrides it.
+                RehearsalSpec {
+                    step_m: a.rehearsal_step_m,
+                    ..RehearsalSpec::default()
+                }
+                .validate()?;
+                250.0
+            };
             (40, 3000.0, 120, step)
         }
     } else {
@@ -119,6 +129,17 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         }
         scenes.retain(|s| a.scenes.contains(&s.name));
     }
+    // 0 turns the rehearsal off; anything else must be a spacing it can fly (checked before
+    // the first scene, not after its first campaign).
+    let rehearsal = (rehearsal_step_m != 0.0)
+        .then(|| RehearsalSpec {
+            step_m: rehearsal_step_m,
+            frames_per_site: a.rehearsal_frames,
+            seed: a.campaign_seed,
+            ..RehearsalSpec::default()
+        })
+        .map(|r| r.validate().map(|()| r))
+        .transpose()?;
     let mut priors = vec![None];
     if a.prior_sigma_m > 0.0 {
         priors.push(Some(PriorSpec {
@@ -146,12 +167,7 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         looks: super::insar::looks_or_preset(a.looks, &a.radar),
         passes: a.passes,
         navmap: NavmapThresholds::default(),
-        rehearsal: (rehearsal_step_m > 0.0).then(|| RehearsalSpec {
-            step_m: rehearsal_step_m,
-            frames_per_site: a.rehearsal_frames,
-            seed: a.campaign_seed,
-            ..RehearsalSpec::default()
-        }),
+        rehearsal,
         budget: a.budget.budget,
     };
     let n_campaigns = scenes.len() * spec.kinds.len() * spec.priors.len();

@@ -55,7 +55,7 @@ pub struct CampaignSpec {
 }
 
 /// Draw a standard normal variate (Box–Muller; one per call keeps the stream simple).
-fn normal(rng: &mut impl RngExt) -> f64 {
+pub(crate) fn normal(rng: &mut impl RngExt) -> f64 {
     let u1: f64 = rng.random::<f64>().max(f64::MIN_POSITIVE);
     let u2: f64 = rng.random();
     (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()

@@ -30,7 +30,7 @@ use serde::Serialize;
 use std::path::Path;
 
 use crate::dem::{Dem, read_geotiff};
-use crate::evaluation::campaign::{CampaignSpec, centre_box, prior_around};
+use crate::evaluation::campaign::{CampaignSpec, centre_box, normal, prior_around};
 use crate::evaluation::trn::score;
 use crate::flyer::frames::{FramePose, synth_frame};
 use crate::flyer::onboard::{FrameInput, WORKSPACE_STACK, new_workspace, run_frame};
@@ -43,6 +43,8 @@ pub const REHEARSAL_STEP_M: f64 = 100.0;
 pub const REHEARSAL_FRAMES: usize = 8;
 /// Default smallest interpolated success fraction for "go".
 pub const REHEARSAL_MIN_SUCCESS: f64 = 0.9;
+/// Salt of the rehearsal's random streams (a campaign's trial streams use the bare seed).
+const REHEARSAL_SALT: u64 = 0x7265_6865_6172_7365;
 /// Most sites per axis (bounds the work: 64² sites × frames).
 pub const REHEARSAL_MAX_SITES_PER_AXIS: usize = 64;
 
@@ -57,6 +59,35 @@ pub struct RehearsalSpec {
     pub min_success: f64,
     /// Seed of the error draw and of every frame.
     pub seed: u64,
+}
+
+/// Slack of the "go" comparison: success fractions are k/n stored as f32 (9/10 is 0.89999998),
+/// so a site exactly at the threshold is "go".
+const GO_SLACK: f64 = 1e-6;
+
+impl RehearsalSpec {
+    /// Refuse settings a rehearsal cannot fly: spacing not a positive finite number of metres,
+    /// no frame per site, a threshold outside 0–1.
+    pub fn validate(&self) -> anyhow::Result<()> {
+        if !(self.step_m.is_finite() && self.step_m > 0.0) {
+            bail!("rehearsal site spacing must be > 0 m, got {}", self.step_m);
+        }
+        if self.frames_per_site == 0 {
+            bail!("a rehearsal needs at least one frame per site");
+        }
+        if !(0.0..=1.0).contains(&self.min_success) {
+            bail!(
+                "the go threshold is a fraction in 0..1, got {}",
+                self.min_success
+            );
+        }
+        Ok(())
+    }
+
+    /// Whether a predicted success fraction `p` is "go".
+    pub fn is_go(&self, p: f64) -> bool {
+        p >= self.min_success - GO_SLACK
+    }
 }
 
 impl Default for RehearsalSpec {
@@ -76,7 +107,8 @@ impl Default for RehearsalSpec {
 pub struct Rehearsal {
     /// Geo x of the first site column, metres.
     pub x0_m: f64,
-    /// Geo y of the first site row, metres.
+    /// Geo y of the first site row, metres (the southernmost: rows run northwards, the
+    /// reverse of a north-up raster's).
     pub y0_m: f64,
     /// Site spacing along x, metres (0 with one column).
     pub step_x_m: f64,
@@ -86,7 +118,8 @@ pub struct Rehearsal {
     pub nx: usize,
     /// Site rows.
     pub ny: usize,
-    /// Fraction of each site's frames with a correct fix, row-major.
+    /// Fraction of each site's frames with a correct fix, row-major from (`x0_m`, `y0_m`):
+    /// index `row * nx + col` is the site at (`x0_m + col·step_x_m`, `y0_m + row·step_y_m`).
     pub success: Vec<f32>,
     /// Frames flown in all.
     pub frames: usize,
@@ -95,16 +128,20 @@ pub struct Rehearsal {
 }
 
 impl Rehearsal {
-    /// Interpolated success fraction for a frame centred at geo `(x, y)` metres; NaN outside the
-    /// sites' box (a frame there would leave the map).
+    /// Interpolated success fraction for a frame centred at geo `(x, y)` metres; up to half the
+    /// nominal site spacing outside the sites' box it takes the edge's value (a campaign's
+    /// truth DEM may give its centre box a few metres more than the reference DEM's), further
+    /// out NaN (a frame there would leave the map).
     pub fn success_at(&self, x_m: f64, y_m: f64) -> f64 {
+        let tol = 0.5 * self.spec.step_m;
         let axis = |v: f64, v0: f64, step: f64, n: usize| -> Option<(usize, f64)> {
             if n == 1 || step == 0.0 {
-                return ((v - v0).abs() <= 1e-6 * v0.abs().max(1.0)).then_some((0, 0.0));
+                return ((v - v0).abs() <= tol).then_some((0, 0.0));
             }
             let t = (v - v0) / step;
             let last = (n - 1) as f64;
-            if !(t >= -1e-9 && t <= last + 1e-9) {
+            let slack = tol / step.abs();
+            if !(t >= -slack && t <= last + slack) {
                 return None;
             }
             let t = t.clamp(0.0, last);
@@ -128,7 +165,7 @@ impl Rehearsal {
 
     /// Whether a frame centred at geo `(x, y)` is predicted to fix.
     pub fn go_at(&self, x_m: f64, y_m: f64) -> bool {
-        self.success_at(x_m, y_m) >= self.spec.min_success
+        self.spec.is_go(self.success_at(x_m, y_m))
     }
 
     /// The interpolated success fraction on the tile's grid (NaN where a frame would leave the
@@ -151,7 +188,7 @@ impl Rehearsal {
             .map(|p| {
                 if !p.is_finite() {
                     f32::NAN
-                } else if f64::from(p) >= self.spec.min_success {
+                } else if self.spec.is_go(f64::from(p)) {
                     1.0
                 } else {
                     0.0
@@ -165,17 +202,10 @@ impl Rehearsal {
         let go = self
             .success
             .iter()
-            .filter(|&&p| f64::from(p) >= self.spec.min_success)
+            .filter(|&&p| self.spec.is_go(f64::from(p)))
             .count();
         go as f64 / self.success.len().max(1) as f64
     }
-}
-
-/// Standard normal draw (Box–Muller).
-fn normal(rng: &mut impl RngExt) -> f64 {
-    let u1: f64 = rng.random::<f64>().max(f64::MIN_POSITIVE);
-    let u2: f64 = rng.random();
-    (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
 }
 
 /// The map's own height error as the reference folder states it: per-cell 1σ (the InSAR
@@ -203,7 +233,9 @@ impl ErrorModel {
     }
 
     /// Read it from a reference folder: `height-crlb.tif` when present, the blur from
-    /// `tile.json` (`sqrt(smoothing_m² − smoothing_applied_m²)`; 0 without the file).
+    /// `tile.json` (`sqrt(smoothing_m² − smoothing_applied_m²)`; 0 without the file). A DEM
+    /// blurred more than the tile's target smoothing had none applied, and its blur reads as
+    /// the target: an underestimate (not the case for any map the project's chain makes).
     pub fn load(dir: &Path) -> anyhow::Result<Self> {
         let crlb = dir.join(crate::insar::products::CRLB_FILE);
         let sigma = crlb
@@ -240,16 +272,24 @@ pub fn plausible_truth(dem: &Dem, error: &ErrorModel, seed: u64) -> anyhow::Resu
             );
         }
         let mut rng = rand_pcg::Pcg64::seed_from_u64(seed ^ 0x5EED_0E22_0000_0001);
-        // Drawn for every cell, so the field does not depend on where the holes are.
-        let white: Vec<f64> = (0..w * h).map(|_| normal(&mut rng)).collect();
         let px = dem.pixel_m()?;
-        let field = if error.blur_m > 0.0 {
-            let f = gaussian_filter(&white, w, h, error.blur_m / px);
+        let blur_px = error.blur_m / px;
+        let field = if blur_px > 0.0 {
+            // Drawn on a grid padded by the kernel's reach and cropped, so edge cells are no
+            // different from inner ones (the filter renormalises a kernel cut by the edge).
+            let pad = (3.0 * blur_px).ceil() as usize;
+            let (pw, ph) = (w + 2 * pad, h + 2 * pad);
+            let white: Vec<f64> = (0..pw * ph).map(|_| normal(&mut rng)).collect();
+            let f = gaussian_filter(&white, pw, ph, blur_px);
+            let crop: Vec<f64> = (0..w * h)
+                .map(|i| f[(i / w + pad) * pw + i % w + pad])
+                .collect();
             // Unit variance again: the σ map is the per-cell error.
-            let sd = (f.iter().map(|v| v * v).sum::<f64>() / f.len() as f64).sqrt();
-            f.into_iter().map(|v| v / sd.max(1e-12)).collect()
+            let sd = (crop.iter().map(|v| v * v).sum::<f64>() / crop.len() as f64).sqrt();
+            crop.into_iter().map(|v| v / sd.max(1e-12)).collect()
         } else {
-            white
+            // Drawn for every cell, so the field does not depend on where the holes are.
+            (0..w * h).map(|_| normal(&mut rng)).collect::<Vec<f64>>()
         };
         for ((z, &sd), e) in out.heights_m_mut().iter_mut().zip(s.heights_m()).zip(field) {
             if z.is_finite() && sd.is_finite() && sd > 0.0 {
@@ -275,30 +315,32 @@ pub fn rehearse(
     spec: &RehearsalSpec,
     progress: &ProgressBar,
 ) -> anyhow::Result<Rehearsal> {
-    if !(spec.step_m.is_finite() && spec.step_m > 0.0) {
-        bail!("rehearsal site spacing must be > 0 m, got {}", spec.step_m);
-    }
-    if spec.frames_per_site == 0 {
-        bail!("a rehearsal needs at least one frame per site");
-    }
-    if !(0.0..=1.0).contains(&spec.min_success) {
-        bail!(
-            "the go threshold is a fraction in 0..1, got {}",
-            spec.min_success
-        );
+    spec.validate()?;
+    if !(campaign.pixel_min_m > 0.0 && campaign.pixel_max_m >= campaign.pixel_min_m) {
+        bail!("need 0 < smallest frame pixel ≤ largest frame pixel");
     }
     let truth = plausible_truth(dem, error, spec.seed)?;
     let (x0, x1, y0, y1) = centre_box(&tile, &truth, campaign)?;
     let sites = |span: f64| -> anyhow::Result<usize> {
-        let n = (span / spec.step_m).ceil() as usize + 1;
-        if n > REHEARSAL_MAX_SITES_PER_AXIS {
+        // Counted in f64 first: a tiny spacing must not overflow the cast.
+        let n = (span / spec.step_m).ceil() + 1.0;
+        if !(n <= REHEARSAL_MAX_SITES_PER_AXIS as f64) {
+            // Readable for absurd input too (a spacing of 1e-300 m).
+            let g = |v: f64| {
+                if (1e-3..1e6).contains(&v) {
+                    format!("{}", (v * 1e3).round() / 1e3)
+                } else {
+                    format!("{v:.1e}")
+                }
+            };
             bail!(
-                "{n} sites per axis at {} m spacing (at most {REHEARSAL_MAX_SITES_PER_AXIS}): \
-                 use a larger spacing",
-                spec.step_m
+                "{} sites per axis at {} m spacing over {span:.0} m (at most \
+                 {REHEARSAL_MAX_SITES_PER_AXIS}): use a larger spacing",
+                g(n),
+                g(spec.step_m)
             );
         }
-        Ok(n)
+        Ok((n as usize).max(2))
     };
     let (nx, ny) = (sites(x1 - x0)?, sites(y1 - y0)?);
     let step = |span: f64, n: usize| if n > 1 { span / (n - 1) as f64 } else { 0.0 };
@@ -317,8 +359,10 @@ pub fn rehearse(
                 || new_workspace(campaign.budget),
                 |ws, n| {
                     let (site, f) = (n / k, n % k);
+                    // Salted: a campaign with the same seed must not draw the same numbers.
                     let mut rng = rand_pcg::Pcg64::seed_from_u64(
-                        spec.seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ (n as u64 + 1),
+                        (spec.seed ^ REHEARSAL_SALT).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+                            ^ (n as u64).wrapping_mul(0xD1B5_4A32_D192_ED03),
                     );
                     let pose = FramePose {
                         x_m: x0 + sx * (site % nx) as f64,
@@ -392,9 +436,13 @@ mod tests {
         assert!((r.success_at(125.0, 175.0) - 0.5).abs() < 1e-12);
         assert!(r.go_at(100.0, 175.0));
         assert!(!r.go_at(140.0, 175.0));
-        assert!(r.success_at(99.0, 200.0).is_nan());
-        assert!(r.success_at(100.0, 201.0).is_nan());
-        assert!(r.success_at(100.0, 149.0).is_nan());
+        // Within half the nominal spacing (100 m) of the box: the edge's value; beyond: NaN.
+        assert_eq!(r.success_at(99.0, 200.0), 1.0);
+        assert_eq!(r.success_at(100.0, 249.0), 1.0);
+        assert_eq!(r.success_at(199.0, 150.0), 0.0);
+        assert!(r.success_at(49.0, 200.0).is_nan());
+        assert!(r.success_at(100.0, 251.0).is_nan());
+        assert!(r.success_at(100.0, 99.0).is_nan());
         assert!((r.go_fraction() - 0.5).abs() < 1e-12);
     }
 
@@ -402,7 +450,8 @@ mod tests {
     fn one_site_answers_only_at_itself() {
         let r = grid(1, 1, vec![1.0]);
         assert_eq!(r.success_at(100.0, 200.0), 1.0);
-        assert!(r.success_at(101.0, 200.0).is_nan());
+        assert_eq!(r.success_at(140.0, 200.0), 1.0);
+        assert!(r.success_at(151.0, 200.0).is_nan());
     }
 
     #[test]

@@ -221,6 +221,9 @@ pub struct SuiteRow {
     pub rehearsal_go_fraction: Option<f64>,
     /// Rehearsal frames flown for this campaign's map.
     pub rehearsal_frames: Option<usize>,
+    /// The rehearsal's predicted chance of a fix, averaged over the campaign's frame centres
+    /// on its sites: its forecast of the campaign's success rate.
+    pub rehearsal_predicted_success: Option<f64>,
 }
 
 /// What one scene gave beyond its campaigns.
@@ -275,7 +278,9 @@ pub fn scene_dem(scene: &Scene) -> anyhow::Result<Dem> {
 }
 
 /// Run one scene: DEM, tiles, campaigns. Writes into `dir`: `dem.tif`, `truth/` and `insar/`
-/// (reference folders), `<kind>-<prior>.json/.csv` per campaign, `navmap-<kind>.tif`.
+/// (reference folders), `<kind>-<prior>.json/.csv` per campaign with `<kind>-<prior>-navmap.csv`
+/// (both maps' predictions at every frame), `navmap-<kind>.tif/.png` (the footprint rule) and,
+/// with a rehearsal, `rehearsal-<kind>-<prior>.tif/.png`, `-success.tif` and `-sites.json`.
 pub fn run_scene(
     scene: &Scene,
     spec: &SuiteSpec,
@@ -413,6 +418,7 @@ pub fn run_scene(
             let h = tile.header();
             let mut nm = NavmapScore::default();
             let mut rm = NavmapScore::default();
+            let mut predicted = Vec::new();
             // Per frame: what the maps read at the true centre, what they predicted, what
             // happened.
             let mut csv = String::from(
@@ -428,7 +434,12 @@ pub fn run_scene(
                     (r.success_at(t.x_m, t.y_m), r.go_at(t.x_m, t.y_m))
                 });
                 if rehearsal.is_some() {
+                    // A centre off the rehearsal's sites (NaN) is "no-go": a frame there would
+                    // leave the map; it does not enter the forecast's mean.
                     rm.add(rgo, ok);
+                    if rp.is_finite() {
+                        predicted.push(rp);
+                    }
                 }
                 if let Some(c) = navmap.cell_at(x, y) {
                     csv += &format!(
@@ -449,6 +460,8 @@ pub fn run_scene(
                 rehearsal: rehearsal.as_ref().map(|_| rm),
                 rehearsal_go_fraction: rehearsal.as_ref().map(Rehearsal::go_fraction),
                 rehearsal_frames: rehearsal.as_ref().map(|r| r.frames),
+                rehearsal_predicted_success: (!predicted.is_empty())
+                    .then(|| predicted.iter().sum::<f64>() / predicted.len() as f64),
             });
             progress.inc(1);
         }
