@@ -291,6 +291,21 @@ fn navmap_rehearsal_tells_textured_from_featureless_ground() {
         let j = json(&nm.join("navmap.json"));
         let go = j["go_fraction"].as_f64().unwrap();
         assert!((lo..=hi).contains(&go), "{}: go {go}", reference.display());
+        // The mean chance agrees with the sites it was averaged from.
+        let sites = json(&nm.join("navmap-sites.json"));
+        let p: Vec<f64> = sites["success"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_f64().unwrap())
+            .collect();
+        let mean = j["mean_predicted_success"].as_f64().unwrap();
+        assert!((mean - p.iter().sum::<f64>() / p.len() as f64).abs() < 1e-6);
+        assert!(
+            (lo..=hi).contains(&mean),
+            "{}: mean {mean}",
+            reference.display()
+        );
         assert_eq!(j["frames"].as_u64(), Some(4 * j["sites"].as_u64().unwrap()));
         for f in [
             "navmap.tif",
