@@ -224,7 +224,8 @@ impl<const MAX_PX: usize, const MAX_W: usize, const MAX_KP: usize, const MAX_MAT
     pub fn matches(&self) -> &[Match] {
         &self.matches
     }
-    /// MSAC inlier flags of the last call, parallel to [`Self::matches`].
+    /// MSAC inlier flags of the last call, parallel to [`Self::matches`]; all false when the
+    /// call's consensus did not run.
     pub fn inliers(&self) -> &[bool] {
         self.inlier.get(..self.matches.len()).unwrap_or(&[])
     }
@@ -652,6 +653,9 @@ impl<'t> Navigator<'t> {
             search: None,
         };
         ws.matches.clear();
+        // A frame whose consensus never runs (too few matches) must not show the last frame's
+        // inlier flags through `inliers()`.
+        ws.inlier.fill(false);
         if feats.len() < self.cfg.gate.min_matches as usize {
             return report;
         }

@@ -18,7 +18,9 @@ use serde::{Deserialize, Serialize};
 use crate::dem::Dem;
 use crate::evaluation::trn::{TrnScore, expected_rotation_rad, score};
 use crate::flyer::frames::{FramePose, SensorModel, centre_extent, frame_reach_m, synth_frame};
-use crate::flyer::onboard::{Budget, FrameInput, WORKSPACE_STACK, new_workspace, run_frame};
+use crate::flyer::onboard::{
+    Budget, FrameInput, WORKSPACE_STACK, Workspace, new_workspace, run_frame,
+};
 
 /// The prior a campaign hands the navigator with every frame: what the nav filter would know in
 /// flight, drawn around the truth with these 1σ (Gaussian, per frame, seeded with the trial).
@@ -166,21 +168,9 @@ pub fn run_trials(
                         pixel_m: spec.pixel_min_m
                             + (spec.pixel_max_m - spec.pixel_min_m) * rng.random::<f64>(),
                     };
-                    let frame = synth_frame(dem, &pose, &spec.sensor, rng.random::<u64>())?;
-                    // The prior draws come after the frame's, so a campaign without a prior flies
-                    // the very frames of the same campaign with one.
-                    let prior = spec
-                        .prior
-                        .map(|p| prior_around(nav.tile(), &pose, &p, &mut rng));
-                    let run = run_frame(
-                        &nav,
-                        ws,
-                        FrameInput::Dem(&frame.heights_m, frame.width, frame.height, pose.pixel_m),
-                        prior.as_ref(),
-                    )
-                    .map_err(|e| anyhow!("trial {i}: {e}"))?;
+                    let mut row = fly_posed(&nav, ws, dem, &pose, spec, &mut rng)
+                        .with_context(|| format!("trial {i}"))?;
                     progress.set_position(done.fetch_add(1, Ordering::Relaxed) as u64 + 1);
-                    let mut row = score(nav.tile(), &run, &pose, frame.width, frame.height);
                     if !spec.host_time {
                         row.time_ms = 0.0;
                     }
@@ -190,6 +180,30 @@ pub fn run_trials(
             .collect()
     });
     rows.into_iter().collect()
+}
+
+/// Fly one frame at `pose` over `dem` as a campaign does: synthesise it with `spec`'s sensor
+/// (noise seeded from `rng`), draw `spec`'s prior around the truth if any, run the flight code
+/// and score it. The prior draws come after the frame's, so a campaign without a prior flies the
+/// very frames of the same campaign with one.
+pub fn fly_posed(
+    nav: &Navigator<'_>,
+    ws: &mut Workspace,
+    dem: &Dem,
+    pose: &FramePose,
+    spec: &CampaignSpec,
+    rng: &mut impl RngExt,
+) -> anyhow::Result<TrnScore> {
+    let frame = synth_frame(dem, pose, &spec.sensor, rng.random::<u64>())?;
+    let prior = spec.prior.map(|p| prior_around(nav.tile(), pose, &p, rng));
+    let run = run_frame(
+        nav,
+        ws,
+        FrameInput::Dem(&frame.heights_m, frame.width, frame.height, pose.pixel_m),
+        prior.as_ref(),
+    )
+    .map_err(|e| anyhow!("{e}"))?;
+    Ok(score(nav.tile(), &run, pose, frame.width, frame.height))
 }
 
 /// Campaign summary (the JSON of `ground-sim eval`, one row of `suite`).

@@ -30,10 +30,9 @@ use serde::Serialize;
 use std::path::Path;
 
 use crate::dem::{Dem, read_geotiff};
-use crate::evaluation::campaign::{CampaignSpec, centre_box, normal, prior_around};
-use crate::evaluation::trn::score;
-use crate::flyer::frames::{FramePose, synth_frame};
-use crate::flyer::onboard::{FrameInput, WORKSPACE_STACK, new_workspace, run_frame};
+use crate::evaluation::campaign::{CampaignSpec, centre_box, fly_posed, normal};
+use crate::flyer::frames::FramePose;
+use crate::flyer::onboard::{WORKSPACE_STACK, new_workspace};
 use crate::insar::pipeline::gaussian_filter;
 
 /// Default spacing of rehearsal sites, metres (a tenth of a 200-px frame at 10 m: the outcome
@@ -373,20 +372,9 @@ pub fn rehearse(
                         pixel_m: campaign.pixel_min_m
                             + (campaign.pixel_max_m - campaign.pixel_min_m) * rng.random::<f64>(),
                     };
-                    let frame = synth_frame(&truth, &pose, &campaign.sensor, rng.random::<u64>())
+                    let s = fly_posed(&nav, ws, &truth, &pose, campaign, &mut rng)
                         .with_context(|| format!("rehearsal frame {n}"))?;
-                    let prior = campaign
-                        .prior
-                        .map(|p| prior_around(nav.tile(), &pose, &p, &mut rng));
-                    let run = run_frame(
-                        &nav,
-                        ws,
-                        FrameInput::Dem(&frame.heights_m, frame.width, frame.height, pose.pixel_m),
-                        prior.as_ref(),
-                    )
-                    .map_err(|e| anyhow!("rehearsal frame {n}: {e}"))?;
                     progress.set_position(done.fetch_add(1, Ordering::Relaxed) as u64 + 1);
-                    let s = score(nav.tile(), &run, &pose, frame.width, frame.height);
                     Ok(s.fix && !s.false_fix)
                 },
             )

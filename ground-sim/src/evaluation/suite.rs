@@ -366,6 +366,17 @@ pub fn run_scene(
             reference.slope.as_ref(),
             &dir.join(format!("navmap-{}", kind.name())),
         )?;
+        // Read once per tile: every prior mode rehearses from the same reference DEM and error.
+        let rehearsal_input = spec
+            .rehearsal
+            .map(|r| -> anyhow::Result<_> {
+                Ok((
+                    r,
+                    read_geotiff(&tdir.join(crate::reference::DEM_FILE))?,
+                    ErrorModel::load(&tdir)?,
+                ))
+            })
+            .transpose()?;
         for prior in &spec.priors {
             let cspec = CampaignSpec {
                 trials: spec.trials,
@@ -391,16 +402,14 @@ pub fn run_scene(
             crate::write_json(&dir.join(format!("{tag}.json")), &summary)?;
             // The rehearsal flies the campaign's own mode (sensor, pixels, prior, budget) from
             // the reference folder alone: its DEM and, for an InSAR map, its height error.
-            let rehearsal = match &spec.rehearsal {
-                Some(r) => {
+            let rehearsal = match &rehearsal_input {
+                Some((r, rdem, error)) => {
                     progress.set_message(format!("{}: {tag} rehearsal", scene.name));
-                    let rdem = read_geotiff(&tdir.join(crate::reference::DEM_FILE))?;
-                    let error = ErrorModel::load(&tdir)?;
                     let reh = rehearse(
                         tile,
                         NavConfig::default(),
-                        &rdem,
-                        &error,
+                        rdem,
+                        error,
                         &cspec,
                         r,
                         &ProgressBar::hidden(),
