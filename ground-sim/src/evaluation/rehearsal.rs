@@ -4,10 +4,11 @@
 //! What the ground has before flight is the reference folder: the tile, the DEM it was built
 //! from and, for an InSAR map, the per-cell height σ the processing reported (its Cramér–Rao
 //! bound). The flyer's frames will come from the true terrain, which differs from the map by the
-//! map's error. A rehearsal therefore flies frames from one plausible truth: the reference DEM
-//! plus an independent draw of that error (Gaussian, per map cell, at the reported σ; a
-//! truth-built map claims none), its holes (the InSAR mask) filled smoothly, so frames there
-//! carry nothing the tile could match. Sites lie on a regular grid over the box where a frame
+//! map's error. A rehearsal therefore flies frames from one plausible truth: a draw of the
+//! terrain given the reference DEM and that error (Gaussian, at the reported σ, correlated by
+//! the DEM's blur; [`plausible_truth`]; a truth-built map claims none, and its DEM is the
+//! truth), its holes (the InSAR mask) filled smoothly, so frames there carry nothing the tile
+//! could match. Sites lie on a regular grid over the box where a frame
 //! fits the map; each flies a few frames at stratified headings, random pixel sizes in the
 //! campaign's range, the sensor's noise and, if asked, a prior drawn like a campaign's. A
 //! site's success fraction is the prediction; between sites it is interpolated bilinearly.
@@ -33,7 +34,6 @@ use crate::dem::{Dem, read_geotiff};
 use crate::evaluation::campaign::{CampaignSpec, centre_box, fly_posed, normal};
 use crate::flyer::frames::FramePose;
 use crate::flyer::onboard::{WORKSPACE_STACK, new_workspace};
-use crate::insar::pipeline::gaussian_filter;
 
 /// Default spacing of rehearsal sites, metres (a tenth of a 200-px frame at 10 m: the outcome
 /// changes over a few hundred metres, the frame's overlap with a feature cluster).
@@ -257,48 +257,151 @@ impl ErrorModel {
     }
 }
 
-/// One plausible truth: `dem` plus a draw of `error` (Gaussian, per-cell σ, correlated by its
-/// blur), holes filled from their neighbours.
+/// One plausible truth: a draw of the terrain given the map `dem` and its reported `error`
+/// (Gaussian, per-cell σ, correlated by its blur), holes filled from their neighbours first.
+///
+/// Not the map plus a fresh draw of its error: the map already carries one draw, so its
+/// frames would share the map's error texture with the tile and carry a second one, twice the
+/// noise power the real ground shows. The real ground shares with the map only the terrain's
+/// own power and differs from it by the error's. Per spatial frequency, with `P` the map's
+/// power, `N` the error's (the mean reported variance, shaped by the blur's spectrum) and
+/// `S = max(P − N, 0)` the terrain's: the Wiener estimate `S/P · map` plus an independent
+/// Gaussian draw of the posterior variance `S·N/P` (conditional simulation). The draw has the
+/// terrain's power `S`, shares `S` with the map and differs from it by `N`, as the ground does.
+/// `P` is averaged over rings of equal frequency (an isotropic terrain) on the map mirrored at
+/// its edges (a periodic field without jumps). The error is taken as stationary at its mean
+/// variance: on a map that mixes 1 m floors and 5 m walls, the floors get a little too much
+/// and the walls too little. A map that reports no error is returned as it is (holes filled).
 pub fn plausible_truth(dem: &Dem, error: &ErrorModel, seed: u64) -> anyhow::Result<Dem> {
     let mut out = dem.clone();
     let (w, h) = (out.width(), out.height());
-    if let Some(s) = &error.sigma {
-        if s.width() != w || s.height() != h {
-            bail!(
-                "the height σ map is {}×{}, the reference DEM {w}×{h}",
-                s.width(),
-                s.height(),
-            );
-        }
-        let mut rng = rand_pcg::Pcg64::seed_from_u64(seed ^ 0x5EED_0E22_0000_0001);
-        let px = dem.pixel_m()?;
-        let blur_px = error.blur_m / px;
-        let field = if blur_px > 0.0 {
-            // Drawn on a grid padded by the kernel's reach and cropped, so edge cells are no
-            // different from inner ones (the filter renormalises a kernel cut by the edge).
-            let pad = (3.0 * blur_px).ceil() as usize;
-            let (pw, ph) = (w + 2 * pad, h + 2 * pad);
-            let white: Vec<f64> = (0..pw * ph).map(|_| normal(&mut rng)).collect();
-            let f = gaussian_filter(&white, pw, ph, blur_px);
-            let crop: Vec<f64> = (0..w * h)
-                .map(|i| f[(i / w + pad) * pw + i % w + pad])
-                .collect();
-            // Unit variance again: the σ map is the per-cell error.
-            let sd = (crop.iter().map(|v| v * v).sum::<f64>() / crop.len() as f64).sqrt();
-            crop.into_iter().map(|v| v / sd.max(1e-12)).collect()
-        } else {
-            // Drawn for every cell, so the field does not depend on where the holes are.
-            (0..w * h).map(|_| normal(&mut rng)).collect::<Vec<f64>>()
-        };
-        for ((z, &sd), e) in out.heights_m_mut().iter_mut().zip(s.heights_m()).zip(field) {
-            if z.is_finite() && sd.is_finite() && sd > 0.0 {
-                *z += (f64::from(sd) * e) as f32;
-            }
-        }
-    }
     crate::sar::geometry::fill_nodata(out.heights_m_mut(), w, h)
         .map_err(|e| anyhow!("filling the reference DEM's holes: {e}"))?;
+    let Some(s) = &error.sigma else {
+        return Ok(out);
+    };
+    if s.width() != w || s.height() != h {
+        bail!(
+            "the height σ map is {}×{}, the reference DEM {w}×{h}",
+            s.width(),
+            s.height(),
+        );
+    }
+    let (mut sum, mut cells) = (0.0f64, 0usize);
+    for &v in s.heights_m() {
+        if v.is_finite() && v > 0.0 {
+            sum += f64::from(v).powi(2);
+            cells += 1;
+        }
+    }
+    if cells == 0 {
+        return Ok(out);
+    }
+    let noise_var = sum / cells as f64;
+    let blur_px = error.blur_m / dem.pixel_m()?;
+    let z: Vec<f64> = out.heights_m().iter().map(|&v| f64::from(v)).collect();
+    let drawn = posterior_draw(&z, w, h, noise_var, blur_px, seed ^ 0x5EED_0E22_0000_0001);
+    for (o, v) in out.heights_m_mut().iter_mut().zip(drawn) {
+        *o = v as f32;
+    }
     Ok(out)
+}
+
+/// [`plausible_truth`]'s draw on a hole-free `w × h` field `z`: the Wiener estimate of the
+/// terrain under a stationary error of variance `noise_var` (Gaussian-correlated, σ `blur_px`
+/// pixels; 0: white) plus a draw of the posterior variance.
+fn posterior_draw(
+    z: &[f64],
+    w: usize,
+    h: usize,
+    noise_var: f64,
+    blur_px: f64,
+    seed: u64,
+) -> Vec<f64> {
+    use rustfft::num_complex::Complex64;
+    let (pw, ph) = (2 * w, 2 * h);
+    let n = pw * ph;
+    let mean = z.iter().sum::<f64>() / z.len().max(1) as f64;
+    // Mirrored at the edges: the padded field is periodic without a jump.
+    let mut spec: Vec<Complex64> = (0..n)
+        .map(|i| {
+            let (r, c) = (i / pw, i % pw);
+            let r = if r < h { r } else { ph - 1 - r };
+            let c = if c < w { c } else { pw - 1 - c };
+            Complex64::new(z[r * w + c] - mean, 0.0)
+        })
+        .collect();
+    fft2(&mut spec, pw, ph, false);
+    // Frequency of every coefficient, cycles per pixel, and its ring.
+    let freq = |k: usize, len: usize| -> f64 {
+        let (k, len) = (k as f64, len as f64);
+        if k < len / 2.0 {
+            k / len
+        } else {
+            (k - len) / len
+        }
+    };
+    let ring_width = 1.0 / pw.max(ph) as f64;
+    let radius = |i: usize| freq(i % pw, pw).hypot(freq(i / pw, ph));
+    // The farthest corner is at √0.5 cycles per pixel.
+    let rings = (0.75 / ring_width) as usize + 2;
+    let ring = |i: usize| ((radius(i) / ring_width).round() as usize).min(rings - 1);
+    let (mut power, mut count) = (vec![0.0f64; rings], vec![0usize; rings]);
+    for (i, c) in spec.iter().enumerate() {
+        power[ring(i)] += c.norm_sqr() / n as f64;
+        count[ring(i)] += 1;
+    }
+    for (p, &k) in power.iter_mut().zip(&count) {
+        *p /= k.max(1) as f64;
+    }
+    // The error's spectrum: white noise through the Gaussian blur, scaled to its variance
+    // (a periodogram's mean over all frequencies is the variance).
+    let shape = |f: f64| (-(std::f64::consts::TAU * blur_px * f).powi(2)).exp();
+    let shape_mean = (0..n).map(|i| shape(radius(i))).sum::<f64>() / n as f64;
+    let mut rng = rand_pcg::Pcg64::seed_from_u64(seed);
+    let mut white: Vec<Complex64> = (0..n)
+        .map(|_| Complex64::new(normal(&mut rng), 0.0))
+        .collect();
+    fft2(&mut white, pw, ph, false);
+    for (i, (c, e)) in spec.iter_mut().zip(&white).enumerate().skip(1) {
+        // (Coefficient 0 is the mean, known.)
+        let p = power[ring(i)];
+        let noise = noise_var * shape(radius(i)) / shape_mean.max(f64::MIN_POSITIVE);
+        let signal = (p - noise).max(0.0);
+        *c = if p > 0.0 {
+            *c * (signal / p) + *e * (signal * noise / p).sqrt()
+        } else {
+            Complex64::new(0.0, 0.0)
+        };
+    }
+    fft2(&mut spec, pw, ph, true);
+    (0..w * h)
+        .map(|i| spec[(i / w) * pw + i % w].re / n as f64 + mean)
+        .collect()
+}
+
+/// In-place 2-D FFT of a row-major `w × h` grid (the inverse unnormalised, as rustfft's).
+fn fft2(data: &mut [rustfft::num_complex::Complex64], w: usize, h: usize, inverse: bool) {
+    use rustfft::num_complex::Complex64;
+    let mut planner = rustfft::FftPlanner::<f64>::new();
+    let (row, col) = if inverse {
+        (planner.plan_fft_inverse(w), planner.plan_fft_inverse(h))
+    } else {
+        (planner.plan_fft_forward(w), planner.plan_fft_forward(h))
+    };
+    data.par_chunks_mut(w).for_each(|r| row.process(r));
+    let mut t = vec![Complex64::new(0.0, 0.0); w * h];
+    t.par_chunks_mut(h).enumerate().for_each(|(x, c)| {
+        for (y, v) in c.iter_mut().enumerate() {
+            *v = data[y * w + x];
+        }
+    });
+    t.par_chunks_mut(h).for_each(|c| col.process(c));
+    data.par_chunks_mut(w).enumerate().for_each(|(y, r)| {
+        for (x, v) in r.iter_mut().enumerate() {
+            *v = t[x * h + y];
+        }
+    });
 }
 
 /// Rehearse the map: fly `spec.frames_per_site` frames at every site against `tile` (with
@@ -443,56 +546,87 @@ mod tests {
     }
 
     #[test]
-    fn plausible_truth_adds_the_claimed_error_and_fills_holes() {
+    fn plausible_truth_has_the_terrains_texture_and_differs_by_the_error() {
         use crate::dem::GeoRef;
+        use crate::insar::pipeline::gaussian_filter;
+        let (w, h) = (128, 128);
         let geo = GeoRef::local(0.0, 0.0, 20.0, "test");
-        let mut z = vec![0.0f32; 100 * 100];
-        z[5050] = f32::NAN;
-        let dem = Dem::new(100, 100, z, geo.clone()).unwrap();
-        let sigma = Dem::new(100, 100, vec![2.0f32; 100 * 100], geo.clone()).unwrap();
-        let corr1 = |t: &Dem| {
-            let z = t.heights_m();
-            let (mut a, mut b) = (0.0, 0.0);
-            for r in 0..100 {
-                for c in 0..99 {
-                    a += f64::from(z[r * 100 + c]) * f64::from(z[r * 100 + c + 1]);
-                    b += f64::from(z[r * 100 + c]).powi(2);
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(11);
+        let mut field = |blur_px: f64, rms: f64| -> Vec<f64> {
+            let white: Vec<f64> = (0..w * h).map(|_| normal(&mut rng)).collect();
+            let f = gaussian_filter(&white, w, h, blur_px);
+            let sd = (f.iter().map(|v| v * v).sum::<f64>() / f.len() as f64).sqrt();
+            f.into_iter().map(|v| v * rms / sd).collect()
+        };
+        // Gentle terrain (smooth, 3 m rms) under a map error of 2 m, blurred by 22.4 m.
+        let terrain = field(6.0, 3.0);
+        let noise = field(22.4 / 20.0, 2.0);
+        let mut z: Vec<f32> = terrain
+            .iter()
+            .zip(&noise)
+            .map(|(t, e)| (t + e) as f32)
+            .collect();
+        z[64 * w + 64] = f32::NAN;
+        let map = Dem::new(w, h, z, geo.clone()).unwrap();
+        let sigma = Dem::new(w, h, vec![2.0f32; w * h], geo.clone()).unwrap();
+        let e = ErrorModel {
+            sigma: Some(sigma),
+            blur_m: 22.4,
+        };
+        let t = plausible_truth(&map, &e, 3).unwrap();
+        assert!(t.heights_m().iter().all(|v| v.is_finite()));
+        let lag1 = |z: &[f64]| {
+            let (mut a, mut k) = (0.0, 0);
+            for r in 0..h {
+                for c in 0..w - 1 {
+                    let d = z[r * w + c + 1] - z[r * w + c];
+                    if d.is_finite() {
+                        a += d * d;
+                        k += 1;
+                    }
                 }
             }
-            a / b
+            (a / k as f64).sqrt()
         };
-        for blur_m in [0.0, 22.4] {
-            let e = ErrorModel {
-                sigma: Some(sigma.clone()),
-                blur_m,
-            };
-            let t = plausible_truth(&dem, &e, 3).unwrap();
-            assert!(t.heights_m().iter().all(|v| v.is_finite()));
-            let n = t.heights_m().len() as f64;
-            let ms = t
-                .heights_m()
-                .iter()
-                .map(|&v| f64::from(v).powi(2))
-                .sum::<f64>()
-                / n;
-            assert!(
-                (ms.sqrt() - 2.0).abs() < 0.1,
-                "blur {blur_m}: rms {}",
-                ms.sqrt()
-            );
-            // White: neighbours independent; blurred by 22.4 m on 20 m cells: a Gaussian
-            // field's neighbour correlation exp(−d²/4σ²) ≈ 0.82.
-            let c = corr1(&t);
-            let want = if blur_m > 0.0 { 0.82 } else { 0.0 };
-            assert!((c - want).abs() < 0.06, "blur {blur_m}: correlation {c}");
+        let as64 = |d: &Dem| -> Vec<f64> { d.heights_m().iter().map(|&v| f64::from(v)).collect() };
+        let (tz, mz) = (as64(&t), as64(&map));
+        // The draw's small-scale texture is the terrain's (0.32 m per cell; drawn 0.41), not
+        // the map's noise (1.24 m; the map plus a second error would read 1.7 m).
+        let (want, map_lag, got) = (lag1(&terrain), lag1(&mz), lag1(&tz));
+        assert!(map_lag > 2.5 * want, "map {map_lag}, terrain {want}");
+        assert!(
+            (got - want).abs() < 0.35 * want,
+            "draw {got}, terrain {want}, map {map_lag}"
+        );
+        // It differs from the map as the real ground does: by the error's 2 m (1.91 m).
+        let diff: Vec<f64> = tz
+            .iter()
+            .zip(&mz)
+            .filter(|(_, m)| m.is_finite())
+            .map(|(a, b)| a - b)
+            .collect();
+        let rms = (diff.iter().map(|d| d * d).sum::<f64>() / diff.len() as f64).sqrt();
+        assert!((rms - 2.0).abs() < 0.3, "draw − map rms {rms}");
+        // Reproducible; another seed, another draw.
+        assert_eq!(
+            plausible_truth(&map, &e, 3).unwrap().heights_m(),
+            t.heights_m()
+        );
+        assert_ne!(
+            plausible_truth(&map, &e, 4).unwrap().heights_m(),
+            t.heights_m()
+        );
+        // No claimed error: the map itself, its hole filled.
+        let none = plausible_truth(&map, &ErrorModel::none(), 3).unwrap();
+        for (a, b) in none.heights_m().iter().zip(map.heights_m()) {
+            assert!(!b.is_finite() || a == b);
         }
-        let none = plausible_truth(&dem, &ErrorModel::none(), 3).unwrap();
-        assert!(none.heights_m().iter().all(|&v| v == 0.0));
+        assert!(none.heights_m()[64 * w + 64].is_finite());
         let small = Dem::new(10, 10, vec![1.0f32; 100], geo).unwrap();
         let bad = ErrorModel {
             sigma: Some(small),
             blur_m: 0.0,
         };
-        assert!(plausible_truth(&dem, &bad, 3).is_err());
+        assert!(plausible_truth(&map, &bad, 3).is_err());
     }
 }

@@ -47,8 +47,9 @@ pub const DEFAULT_BLOCK_CELLS: usize = 400;
 /// window, the geocoding's edge extension and its 8-pixel search, and the fold of walls up to
 /// ≈ 250 m high at 26° incidence.
 pub const DEFAULT_OVERLAP_CELLS: usize = 25;
-/// Version of the block files (`block.json`).
-pub const BLOCK_FORMAT_VERSION: u32 = 1;
+/// Version of the block files (`block.json`). 2: the height CRLB layer follows the DEM
+/// filter (`pipeline::dem_filter_noise_factor`), and the record carries that factor.
+pub const BLOCK_FORMAT_VERSION: u32 = 2;
 /// Folder of the block products inside an `insar` output folder.
 pub const BLOCKS_DIR: &str = "blocks";
 const BLOCK_JSON: &str = "block.json";
@@ -232,6 +233,8 @@ pub struct BlockRecord {
     pub window_side_m: f64,
     /// Equivalent looks of one window, times the stacked passes.
     pub effective_looks: f64,
+    /// Factor the DEM filter shrank the height CRLB by (`InsarProduct::crlb_filter_factor`).
+    pub crlb_filter_factor: f64,
     /// Coregistration figures.
     pub coreg: CoregReport,
     /// Unwrapping figures.
@@ -458,6 +461,7 @@ pub fn run_block(job: &BlockJob<'_>, index: usize) -> anyhow::Result<BlockRecord
         geometry: product.geometry,
         window_side_m,
         effective_looks: product.effective_looks,
+        crlb_filter_factor: product.crlb_filter_factor,
         coreg: product.coreg,
         unwrap: product.unwrap,
         mask: product.mask,
@@ -870,6 +874,7 @@ pub fn mosaic(job: &BlockJob<'_>) -> anyhow::Result<Mosaic> {
             labels: Vec::new(),
         },
         effective_looks: centre.effective_looks,
+        crlb_filter_factor: centre.crlb_filter_factor,
         coreg: centre.coreg,
         unwrap,
         eq20_removed: blocks.iter().map(|b| b.record.eq20_removed).sum(),

@@ -15,7 +15,9 @@ use super::geocode::{
     GeocodeParams, OutputGrid, RadarPixels, eq20_mask, geocode, label, ray_trace_mask,
 };
 use super::geometry::{PairGeometry, wrap_rad};
-use super::looks::{LookWindow, equivalent_looks_1d, multilook, phase_crlb_rad};
+use super::looks::{
+    LookWindow, equivalent_looks_1d, multilook, multilook_noise_correlation, phase_crlb_rad,
+};
 use super::unwrap::unwrap_quality_guided;
 use super::{InsarError, InsarResult};
 use crate::dem::Dem;
@@ -261,6 +263,9 @@ pub struct InsarProduct {
     /// Equivalent independent looks of one window, times the stacked passes
     /// ([`InsarConfig::passes`]).
     pub effective_looks: f64,
+    /// Factor, 0–1, by which the DEM filter shrank the height CRLB of every cell
+    /// ([`dem_filter_noise_factor`]; 1 without the filter).
+    pub crlb_filter_factor: f64,
     /// Coregistration figures.
     pub coreg: CoregReport,
     /// Unwrapping figures.
@@ -358,21 +363,27 @@ pub fn cycle_height_m(p: &InsarProduct, col: usize) -> f64 {
 }
 
 /// Two looks' heights of one cell that differ by more than this many combined per-cell CRLBs
-/// are not fused but dropped: the bound is conservative (the filtered DEM's error is ≈ 0.6 of
-/// it, docs/insar.md), so agreeing measurements pass at ≈ 6σ, while a wrong 2π cycle in one
-/// look (183 m for the 32 m boom, 733 m for the paper's) is caught wherever the bounds are
-/// below ≈ 30 m.
-pub const FUSE_CONSISTENCY_SIGMAS: f64 = 4.0;
+/// are not fused but dropped. The heights differ by more than their noise: each look's window
+/// sees a slope from its own side, and the noise-free chain has its own error floor
+/// ([`FUSE_MIN_BOUND_M`]); so agreeing measurements must pass well beyond 3σ, while a wrong 2π
+/// cycle in one look (183 m for the 32 m boom, 733 m for the paper's) is caught wherever the
+/// bounds are below ≈ 18 m. (Until session 24 the CRLB ignored the DEM filter and read 1.8×
+/// the noise; the check was then 4 of those bounds with a 1 m floor: the same thresholds.)
+pub const FUSE_CONSISTENCY_SIGMAS: f64 = 7.0;
+
+/// Smallest per-look bound, m, the consistency check uses: the chain's error without thermal
+/// noise (window resolution, speckle centroids; 0.59 m on a tilted plane, the stacked-passes
+/// test), which the CRLB does not count.
+pub const FUSE_MIN_BOUND_M: f64 = 0.6;
 
 /// Whether two looks' heights `a`, `b` (m) with per-cell bounds `sa`, `sb` (m) differ by more
-/// than [`FUSE_CONSISTENCY_SIGMAS`] combined bounds. A bound below 1 m counts as 1 m (the DEM
-/// filter and the range bias between the looks are of that order); a missing bound never
-/// disagrees.
+/// than [`FUSE_CONSISTENCY_SIGMAS`] combined bounds. A bound below [`FUSE_MIN_BOUND_M`] counts
+/// as that; a missing bound never disagrees.
 pub fn looks_disagree(a: f32, b: f32, sa: f32, sb: f32) -> bool {
     let bound = |s: f32| {
         let s = f64::from(s);
         if s.is_finite() {
-            s.max(1.0)
+            s.max(FUSE_MIN_BOUND_M)
         } else {
             f64::INFINITY
         }
@@ -731,7 +742,28 @@ pub fn process_stack(
     }
     let dem = grid.raster(masked(&heights))?;
     let coherence = grid.raster(masked(&geo.channels[1]))?;
-    let crlb_m = grid.raster(masked(&geo.channels[2]))?;
+    // The bound follows the heights through the DEM filter: it averages noise that is
+    // correlated over the multilook windows' overlap, not white (`dem_filter_noise_factor`).
+    let crlb_filter_factor = if cfg.dem_filter_sigma_px > 0.0 {
+        dem_filter_noise_factor(
+            cfg.dem_filter_sigma_px,
+            w.size,
+            w.step,
+            [
+                grid.pixel_m / (g.azimuth_spacing_m * w.step as f64),
+                grid.pixel_m / ml_ground_m,
+            ],
+            [cfg.azimuth_oversampling, cfg.range_oversampling],
+            cfg.hamming_alpha,
+        )
+    } else {
+        1.0
+    };
+    let sig_filtered: Vec<f64> = geo.channels[2]
+        .iter()
+        .map(|&v| v * crlb_filter_factor)
+        .collect();
+    let crlb_m = grid.raster(masked(&sig_filtered))?;
     let mask = MaskFractions::of(&out_labels);
     let coherence_mean_radar = coh64.iter().sum::<f64>() / coh64.len().max(1) as f64;
 
@@ -757,6 +789,7 @@ pub fn process_stack(
         labels: out_labels,
         radar: radar_layers,
         effective_looks: looks_eff,
+        crlb_filter_factor,
         coreg: CoregReport {
             offset_near_gates: offset.first().copied().unwrap_or(0.0),
             offset_far_gates: offset.last().copied().unwrap_or(0.0),
@@ -841,6 +874,59 @@ pub fn recentre_heights(
         cur = next;
     }
     cur
+}
+
+/// Factor by which a Gaussian filter of `sigma_px` output pixels (as [`gaussian_filter`])
+/// shrinks the standard deviation of multilook height noise: `Σ_ij w_i w_j ρ(i − j)` per axis,
+/// multiplied over both, with `w` the filter's normalised weights and `ρ` the noise correlation
+/// of neighbouring cells ([`multilook_noise_correlation`] of a `size`-sample window moved
+/// `step` samples per radar pixel, at `lag_per_px[axis]` radar pixels per output pixel;
+/// azimuth first, then range, each with its `oversampling`). White noise would shrink by
+/// `Σ w²` per axis (0.28 at 1 px); the overlap of the looks keeps more. For the default chain
+/// (8-sample windows, step 4, 2× oversampling, radar pixels of the 20 m grid) it is 0.55,
+/// and the correlation it predicts after the filter, 0.84 at one cell and 0.49 at two, is
+/// what the suite's InSAR height errors show (0.80–0.82 and 0.46–0.53; [`crate::evaluation::rehearsal::ErrorModel`]).
+pub fn dem_filter_noise_factor(
+    sigma_px: f64,
+    size: usize,
+    step: usize,
+    lag_per_px: [f64; 2],
+    oversampling: [f64; 2],
+    alpha: f64,
+) -> f64 {
+    if !(sigma_px > 0.0 && sigma_px.is_finite()) {
+        return 1.0;
+    }
+    let r = (3.0 * sigma_px).ceil() as usize;
+    let k: Vec<f64> = (0..=2 * r)
+        .map(|i| {
+            let d = i as f64 - r as f64;
+            (-d * d / (2.0 * sigma_px * sigma_px)).exp()
+        })
+        .collect();
+    let total: f64 = k.iter().sum();
+    let mut factor = 1.0;
+    for axis in 0..2 {
+        let rho: Vec<f64> = (0..=2 * r)
+            .map(|d| {
+                multilook_noise_correlation(
+                    size,
+                    step,
+                    d as f64 * lag_per_px[axis],
+                    oversampling[axis],
+                    alpha,
+                )
+            })
+            .collect();
+        let mut var = 0.0;
+        for (i, a) in k.iter().enumerate() {
+            for (j, b) in k.iter().enumerate() {
+                var += a * b * rho[i.abs_diff(j)];
+            }
+        }
+        factor *= var.max(0.0).sqrt() / total;
+    }
+    factor
 }
 
 /// Gaussian filter of standard deviation `sigma_px` (kernel cut at 3σ) over the finite values

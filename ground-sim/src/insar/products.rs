@@ -73,6 +73,9 @@ pub struct InsarReport {
     pub tile: TileSummary,
     /// Equivalent independent looks of one multilook window, times the stacked passes.
     pub effective_looks: f64,
+    /// Factor, 0–1, by which the DEM filter shrank every cell's height CRLB (the looks'
+    /// overlap keeps their noise correlated; `pipeline::dem_filter_noise_factor`).
+    pub crlb_filter_factor: f64,
     /// Height of ambiguity at the scene centre, m per 2π.
     pub height_of_ambiguity_m: f64,
     /// Mean coherence of every multilooked radar pixel (masked ones included).
@@ -351,6 +354,7 @@ pub fn write_outputs(
         tile_features: tile.features,
         tile,
         effective_looks: p.effective_looks,
+        crlb_filter_factor: p.crlb_filter_factor,
         height_of_ambiguity_m: p.unwrap.ambiguity_height_m,
         coherence_mean_radar: p.coherence_mean_radar,
         coregistration: p.coreg,

@@ -284,7 +284,10 @@ fn a_preset_crop_meets_the_accuracy_targets() {
     let (dem, _) = generate(&p, &indicatif::ProgressBar::hidden()).unwrap();
     let (_, a) = chain(&dem, &quiet());
     assert!(a.height_rmse_m <= 5.0, "rmse {}", a.height_rmse_m);
-    assert!(a.height_rmse_m <= 1.5 * a.crlb_height_m, "{a:?}");
+    // No RMSE-over-CRLB bound here: without thermal noise the coherence is 0.999 and the
+    // error is the chain's own floor (window resolution, speckle centroids: 0.6–1.0 m), which
+    // a noise bound does not describe. The bound's size is checked where noise dominates
+    // (`stacked_passes_shrink_the_height_error_as_the_crlb_says`).
     assert!(a.slope_rmse_deg <= 3.0, "slope {}", a.slope_rmse_deg);
     assert!(a.valid_fraction >= 0.95, "valid {}", a.valid_fraction);
 }
@@ -303,10 +306,8 @@ fn the_real_lola_tile_runs_through_the_whole_chain() {
     let ctx = super::products::RunContext::default();
     let rep = super::products::write_outputs(dir.path(), &run.product, &run.truth, &ctx).unwrap();
     eprintln!("LOLA: {}", serde_json::to_string(&rep.accuracy).unwrap());
-    assert!(
-        a.height_rmse_m <= 5.0 && a.height_rmse_m <= 1.5 * a.crlb_height_m,
-        "{a:?}"
-    );
+    // Noise-free: no RMSE-over-CRLB bound (see `a_preset_crop_meets_the_accuracy_targets`).
+    assert!(a.height_rmse_m <= 5.0, "{a:?}");
     assert!(a.slope_rmse_deg <= 2.0, "slope {}", a.slope_rmse_deg);
     assert!(a.valid_fraction >= 0.95, "valid {}", a.valid_fraction);
     // A reference folder that the closed-loop tools load, and the report keys.
@@ -360,7 +361,6 @@ fn full_presets_meet_the_issue_targets() {
             "{preset:?} rmse {}",
             a.height_rmse_m
         );
-        assert!(a.height_rmse_m <= 1.5 * a.crlb_height_m, "{preset:?} {a:?}");
         if preset == Preset::Shoemaker {
             assert!(a.valid_fraction >= 0.95, "valid {}", a.valid_fraction);
         } else {
@@ -711,7 +711,7 @@ fn looks_that_differ_by_a_cycle_are_not_fused() {
     assert!(looks_disagree(-1500.0, -1683.0, 2.0, 2.0));
     // A few metres apart with a few metres of bound: the same ground.
     assert!(!looks_disagree(-1500.0, -1506.0, 2.0, 2.0));
-    // Tight bounds count as 1 m: 5 m apart still agrees, 6 m does not.
+    // Tight bounds count as 0.6 m (7 × 0.85 m = 5.9 m): 5 m apart still agrees, 6 m does not.
     assert!(!looks_disagree(10.0, 15.0, 0.1, 0.1));
     assert!(looks_disagree(10.0, 16.0, 0.1, 0.1));
     // A missing bound never disagrees.
@@ -779,7 +779,7 @@ fn a_coarse_prior_dem_picks_the_cycles_the_datum_rule_gets_wrong() {
 }
 
 /// Four passes of one track: the phase comes from four times the samples, so the CRLB halves
-/// and the noise's share of the height error follows it. At NESZ −15 dB over a 1 km tilted
+/// and the noise's share of the height error follows it, at the size the CRLB states. At NESZ −15 dB over a 1 km tilted
 /// plane (one look) the noise dominates; the noise-free run gives the error floor that
 /// stacking cannot touch (the speckle is the same ground in every pass).
 #[test]
@@ -831,6 +831,18 @@ fn stacked_passes_shrink_the_height_error_as_the_crlb_says() {
         "the noise should dominate one pass"
     );
     assert!(ratio > 0.35 && ratio < 0.7, "noise ratio {ratio}");
+    // The bound is the noise's own size, not a loose ceiling: before it followed the heights
+    // through the DEM filter it claimed twice the noise (0.44×); measured 0.80 and 0.76 (the
+    // geocoding's interpolation, which also averages, is not credited).
+    for (a, name) in [(&one, "one pass"), (&four, "four passes")] {
+        let honest = noise(a) / a.crlb_height_m;
+        assert!(
+            honest > 0.65 && honest <= 1.05,
+            "{name}: noise {:.3} m over its CRLB {:.3} m",
+            noise(a),
+            a.crlb_height_m
+        );
+    }
     assert!(four.valid_fraction >= one.valid_fraction - 1e-9);
     // Out of range: refused before anything is simulated.
     let bad = InsarConfig {
