@@ -48,10 +48,10 @@ pub struct Args {
     /// `insar`'s defaults); only the remainder is applied.
     #[arg(long, default_value_t = 0.0)]
     pub inherent_smoothing_m: f64,
-    /// Share of the DEM's valid cells made by one look direction alone, 0–1 (an InSAR DEM fused
-    /// from two opposite looks: (east_only + west_only) / (both_valid + east_only + west_only)
-    /// of its `report.json` → `looks`; 1 = one look or unknown). Scales
-    /// the blur term of the tile's reference error (`ground_sim::reference::reference_sigma_m`).
+    /// Share of valid cells made by one look direction alone under the frame that has most of
+    /// them, 0–1 (an InSAR DEM fused from two opposite looks: its `report.json` →
+    /// `looks.worst_window_one_look_share`; 1 = one look or unknown). Scales the blur term of
+    /// the tile's reference error (`ground_sim::reference::reference_sigma_m`).
     #[arg(long, default_value_t = 1.0)]
     pub one_look_share: f64,
     /// Most features kept (strongest first).

@@ -677,6 +677,12 @@ fn fused_looks(blocks: &[BlockProduct]) -> Option<LookFusion> {
             .iter()
             .filter(|(_, l)| l.west_cycles_shifted != 0)
             .count() as i64,
+        // The worst window of any block (windows across block edges are not scanned).
+        worst_window_one_look_share: parts
+            .iter()
+            .map(|(_, l)| l.worst_window_one_look_share)
+            .filter(|v| v.is_finite())
+            .fold(f64::NAN, f64::max),
     })
 }
 

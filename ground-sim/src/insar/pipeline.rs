@@ -338,9 +338,38 @@ pub struct LookFusion {
     /// shifted (each block's own shift is in the report's `blocks.per_block`).
     #[serde(default)]
     pub west_cycles_shifted: i64,
+    /// Largest share of one-look cells among the valid cells of any square window of
+    /// [`ONE_LOOK_WINDOW_M`] on the grid (windows at least half valid), 0–1: what the frame
+    /// over the most one-look ground carries ([`LookFusion::one_look_share_for_frames`]). NaN
+    /// when not known (reports before session 24; a grid smaller than the window takes the
+    /// whole map's share). For a map in blocks: the largest of its blocks'.
+    #[serde(default = "nan")]
+    pub worst_window_one_look_share: f64,
 }
 
+fn nan() -> f64 {
+    f64::NAN
+}
+
+/// Side of the windows [`LookFusion::worst_window_one_look_share`] scans, metres: a flight
+/// frame's footprint (200 px at 10 m).
+pub const ONE_LOOK_WINDOW_M: f64 = 2000.0;
+
 impl LookFusion {
+    /// The share of one-look cells a tile's reference error must cover
+    /// (`reference::reference_sigma_m`): the worst frame-sized window's
+    /// ([`LookFusion::worst_window_one_look_share`]), else the whole map's. A frame's fix
+    /// moves by the share of its own cells that keep one look's shift; one-look cells cluster
+    /// on the walls each look cannot see, so the map's mean under-covers the frames there (the
+    /// fresh rim's fixes read NEES 6.6 with it).
+    pub fn one_look_share_for_frames(&self) -> f64 {
+        if self.worst_window_one_look_share.is_finite() {
+            self.worst_window_one_look_share
+        } else {
+            self.one_look_share()
+        }
+    }
+
     /// Share of the fused map's valid cells made by one look alone, 0–1 (1 when no cell is
     /// valid): the cells whose range-direction shift the second look did not cancel
     /// (`reference::reference_sigma_m`).
@@ -1180,9 +1209,13 @@ pub fn fuse_looks(east: &mut InsarProduct, west: &InsarProduct) -> anyhow::Resul
     let mut dem = east.dem.heights_m().to_vec();
     let mut coh = east.coherence.heights_m().to_vec();
     let mut sig = east.crlb_m.heights_m().to_vec();
+    // Per cell: valid after fusion, and made by one look alone.
+    let (mut valid_fused, mut one_look) = (vec![false; n], vec![false; n]);
     for i in 0..n {
         let ev = east.labels[i] == label::VALID && dem[i].is_finite();
         let wv = wl[i] == label::VALID && wd[i].is_finite();
+        valid_fused[i] = ev || wv;
+        one_look[i] = ev != wv;
         match (ev, wv) {
             (true, true) if looks_disagree(dem[i], wd[i], sig[i], ws[i]) => {
                 // Two measurements of one height that differ by more than their errors allow:
@@ -1190,6 +1223,7 @@ pub fn fuse_looks(east: &mut InsarProduct, west: &InsarProduct) -> anyhow::Resul
                 // would be wrong by a fraction of a cycle that no mask shows, so neither is
                 // kept.
                 inconsistent += 1;
+                valid_fused[i] = false;
                 east.labels[i] = label::LOW_COHERENCE;
                 dem[i] = f32::NAN;
                 coh[i] = f32::NAN;
@@ -1227,6 +1261,12 @@ pub fn fuse_looks(east: &mut InsarProduct, west: &InsarProduct) -> anyhow::Resul
             }
         }
     }
+    let worst_window_one_look_share = worst_window_share(
+        &one_look,
+        &valid_fused,
+        w,
+        ONE_LOOK_WINDOW_M / east.grid.pixel_m,
+    );
     east.dem = east.grid.raster(dem)?;
     east.coherence = east.grid.raster(coh)?;
     east.crlb_m = east.grid.raster(sig)?;
@@ -1240,10 +1280,69 @@ pub fn fuse_looks(east: &mut InsarProduct, west: &InsarProduct) -> anyhow::Resul
         west_only: frac(w_only),
         inconsistent: frac(inconsistent),
         west_cycles_shifted,
+        worst_window_one_look_share,
     };
     east.look_fusion = Some(fusion);
     east.seconds += west.seconds;
     Ok(fusion)
+}
+
+/// Largest share of `flag`ged cells among the `valid` cells of any `side_px`-cell square
+/// window of a row-major `w`-wide grid (windows less than half valid are skipped); the whole
+/// grid's share when no window fits or qualifies; NaN when nothing is valid. Summed-area
+/// tables: linear in the grid whatever the window.
+pub fn worst_window_share(flag: &[bool], valid: &[bool], w: usize, side_px: f64) -> f64 {
+    let n = valid.len().min(flag.len());
+    let h = n / w.max(1);
+    let whole = {
+        let v = valid.iter().filter(|&&v| v).count();
+        let f = (0..n).filter(|&i| valid[i] && flag[i]).count();
+        if v == 0 {
+            f64::NAN
+        } else {
+            f as f64 / v as f64
+        }
+    };
+    let k = if side_px.is_finite() {
+        side_px.round().max(1.0) as usize
+    } else {
+        0
+    };
+    if w == 0 || k == 0 || k > w || k > h {
+        return whole;
+    }
+    // table[(r)(w+1) + c] = count over rows < r, columns < c.
+    let table = |cell: &dyn Fn(usize) -> bool| -> Vec<u32> {
+        let mut t = vec![0u32; (w + 1) * (h + 1)];
+        for r in 0..h {
+            let mut run = 0u32;
+            for c in 0..w {
+                run += u32::from(cell(r * w + c));
+                t[(r + 1) * (w + 1) + c + 1] = t[r * (w + 1) + c + 1] + run;
+            }
+        }
+        t
+    };
+    let tv = table(&|i| valid[i]);
+    let tf = table(&|i| valid[i] && flag[i]);
+    let sum = |t: &[u32], r: usize, c: usize| {
+        let at = |rr: usize, cc: usize| i64::from(t[rr * (w + 1) + cc]);
+        at(r + k, c + k) - at(r, c + k) - at(r + k, c) + at(r, c)
+    };
+    let mut worst = f64::NAN;
+    for r in 0..=h - k {
+        for c in 0..=w - k {
+            let v = sum(&tv, r, c);
+            if 2 * v < (k * k) as i64 {
+                continue;
+            }
+            let share = sum(&tf, r, c) as f64 / v as f64;
+            if !(share <= worst) {
+                worst = share;
+            }
+        }
+    }
+    if worst.is_finite() { worst } else { whole }
 }
 
 /// The InSAR chain on an already simulated pair of `truth`; returns the truth on the output

@@ -157,7 +157,7 @@ pub fn write_outputs(
         Smoothing {
             target_m: crate::reference::INSAR_SMOOTHING_M,
             inherent_m: p.config.inherent_smoothing_m(),
-            one_look_share: p.look_fusion.map_or(1.0, |f| f.one_look_share()),
+            one_look_share: p.look_fusion.map_or(1.0, |f| f.one_look_share_for_frames()),
         },
     )
     .context("building the reference tile")?;

@@ -205,6 +205,8 @@ fn a_second_look_maps_the_wall_the_first_has_in_layover() {
         (fused - full * share as f32).abs() < 1e-5,
         "{fused} vs {full}"
     );
+    // The scene is smaller than a frame's 2 km window: the frames' share is the map's.
+    assert_eq!(f.one_look_share_for_frames(), share);
     assert_eq!(crate::reference::reference_sigma_m(22.4, 0.0), [0.0; 2]);
     // A one-look map, or an unknown share, claims the whole blur term.
     assert_eq!(
@@ -850,4 +852,30 @@ fn stacked_passes_shrink_the_height_error_as_the_crlb_says() {
         ..InsarConfig::default()
     };
     assert!(run_from_dem(&dem, &noisy, Polarisation::HH, &bad, false).is_err());
+}
+
+#[test]
+fn the_frames_share_of_one_look_cells_is_the_worst_windows() {
+    use super::pipeline::worst_window_share;
+    // 40 × 40 cells, the west half made by one look alone.
+    let (w, h) = (40, 40);
+    let flag: Vec<bool> = (0..w * h).map(|i| i % w < 20).collect();
+    let mut valid = vec![true; w * h];
+    // Map-wide half the cells; a 20-cell window inside the west half has nothing else.
+    assert!((worst_window_share(&flag, &valid, w, 40.0) - 0.5).abs() < 1e-12);
+    assert!((worst_window_share(&flag, &valid, w, 20.0) - 1.0).abs() < 1e-12);
+    // A window between the two: 10 of its 30 columns.
+    assert!((worst_window_share(&flag, &valid, w, 30.0) - 20.0 / 30.0).abs() < 1e-12);
+    // Larger than the grid, or not a size: the whole map's share.
+    assert!((worst_window_share(&flag, &valid, w, 100.0) - 0.5).abs() < 1e-12);
+    assert!((worst_window_share(&flag, &valid, w, f64::NAN) - 0.5).abs() < 1e-12);
+    // Mostly holes: a window less than half valid does not speak. Only rows 0–4 of the west
+    // half stay valid, so a window needs 7 east columns to be half valid: 65 / 205 at most.
+    for (i, v) in valid.iter_mut().enumerate() {
+        *v = i % w >= 20 || i / w < 5;
+    }
+    let s = worst_window_share(&flag, &valid, w, 20.0);
+    assert!((s - 65.0 / 205.0).abs() < 1e-12, "{s}");
+    // Nothing valid: unknown.
+    assert!(worst_window_share(&flag, &[false; 1600], w, 20.0).is_nan());
 }

@@ -159,8 +159,9 @@ pub const REFERENCE_SHIFT_PER_BLUR: f64 = 0.08;
 /// (`nav_core::TileHeader::reference_sigma_m`): [`REFERENCE_SHIFT_PER_BLUR`] × the blur the
 /// frames cannot reproduce, the DEM's inherent smoothing `inherent_m` (e.g. an InSAR DEM's
 /// multilook and filter blur, Gaussian-equivalent σ; its shape is not the Gaussian the frames
-/// are smoothed with, so blobs land differently), × `one_look_share`, the share of the map's
-/// valid cells made by one look direction alone (1 for a one-look map or when unknown).
+/// are smoothed with, so blobs land differently), × `one_look_share`, the share of valid
+/// cells made by one look direction alone under the frame that has most of them (1 for a
+/// one-look map or when unknown; `insar` passes `LookFusion::one_look_share_for_frames`).
 ///
 /// Why the share: the blobs' displacement comes from a multilook window that spans more ground
 /// on slopes facing the radar than on slopes facing away, so it points along the look's range
@@ -169,8 +170,9 @@ pub const REFERENCE_SHIFT_PER_BLUR: f64 = 0.08;
 /// cells that keep one look's shift. κ was calibrated on one-look maps; on the fused maps of
 /// the default radar (session 21, docs/insar.md, "The default radar") κ × blur made the
 /// fixes padded (mean NEES 0.30–0.97 on the seed-1 suite), with the share 0.62–2.09 at both
-/// seeds. The share is the whole map's: frames over the parts one look maps alone (walls)
-/// claim too little, and the seed-2 fresh rim scores NEES 6.8 (75.8 % within 3σ) with it.
+/// seeds. The whole map's share left frames over the parts one look maps alone (walls)
+/// claiming too little (the fresh rim's fixes: NEES 6.6–6.8); since session 24 the share is
+/// the worst frame-sized window's, a bound for every frame over the map.
 ///
 /// Errors that shift a whole frame alike never show in a fix's residuals, so the tile must say
 /// them. A DEM with no blur of its own (a truth-built tile) claims 0: the frames' binning and
@@ -221,9 +223,10 @@ pub struct Smoothing {
     /// Gaussian-equivalent σ the DEM already carries, metres (e.g. InSAR multilooking and its
     /// DEM filter); the builder applies `sqrt(target² − inherent²)`.
     pub inherent_m: f64,
-    /// Share of the DEM's valid cells made by a single look direction, 0–1 (1: a one-look
-    /// InSAR map, or unknown; 0: every cell fused from two opposite looks). Scales the blur
-    /// term of the tile's reference error ([`reference_sigma_m`]).
+    /// Share of valid cells made by a single look direction under the frame-sized window
+    /// that has most of them, 0–1 (1: a one-look InSAR map, or unknown; 0: every cell fused
+    /// from two opposite looks). Scales the blur term of the tile's reference error
+    /// ([`reference_sigma_m`]).
     pub one_look_share: f64,
 }
 
