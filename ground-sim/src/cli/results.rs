@@ -122,7 +122,7 @@ fn suite_section(
          frames 200 px at 9–11 m with any heading, without and with a prior (σ 50 m, heading σ 2°, scale σ 2 %, drawn around the truth). \
          The two \"navmap\" columns score the navigability maps (`ground-sim navmap`, from the reference folder alone; docs/navmap.md) against the campaign's frames: \
          the success rate of the frames each called \"go\" and the fraction of frames whose outcome it predicted. The footprint rule reads tile features, valid reference and slope texture under the frame; \
-         the rehearsal (the default) flies the flight code against the tile beforehand, in the campaign's prior mode, with frames from the reference DEM plus a draw of the map's own reported error. \
+         the rehearsal (the default) flies the flight code against the tile beforehand, in the campaign's prior mode, with frames from a draw of the terrain given the reference DEM and the map's own reported error. \
          The whole suite took {:.0} s on this 2-core machine.\n",
         report["seconds"].as_f64().unwrap_or(f64::NAN)
     )?;

@@ -397,7 +397,8 @@ pub fn cycle_height_m(p: &InsarProduct, col: usize) -> f64 {
 /// ([`FUSE_MIN_BOUND_M`]); so agreeing measurements must pass well beyond 3σ, while a wrong 2π
 /// cycle in one look (183 m for the 32 m boom, 733 m for the paper's) is caught wherever the
 /// bounds are below ≈ 18 m. (Until session 24 the CRLB ignored the DEM filter and read 1.8×
-/// the noise; the check was then 4 of those bounds with a 1 m floor: the same thresholds.)
+/// the noise; the check was then 4 of those bounds with a 1 m floor: the same thresholds
+/// within a few per cent.)
 pub const FUSE_CONSISTENCY_SIGMAS: f64 = 7.0;
 
 /// Smallest per-look bound, m, the consistency check uses: the chain's error without thermal
