@@ -22,8 +22,9 @@ use nav_core::{NavConfig, Tile};
 /// How the map decides "go".
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
 pub enum Method {
-    /// Fly the flight code against the reference from its own DEM plus a draw of its reported
-    /// error (needs reference-dem.tif; uses height-crlb.tif when the folder has one).
+    /// Fly the flight code against the reference with frames from a draw of the terrain given
+    /// its own DEM and its reported error (needs reference-dem.tif; uses height-crlb.tif when
+    /// the folder has one).
     Rehearsal,
     /// Thresholds on tile features, valid fraction and slope texture under the frame.
     Footprint,

@@ -208,7 +208,7 @@ fn suite_section(
     md.push_str(&success_rows(&report_paper, &all_cols[2..]));
     writeln!(
         md,
-        "\nThe navigability maps over all campaigns of each seed (frames called \"go\": how many, how many got a correct fix; agreement = outcomes predicted right). The footprint rule reads feature count, valid fraction and slope texture under the frame; the rehearsal flies the flight code against the reference from its own DEM plus a draw of its reported error, in the campaign's prior mode (`ground_sim::evaluation::rehearsal`):\n\n| seed | tile | map | go frames | go success | agreement |\n|---|---|---|---|---|---|"
+        "\nThe navigability maps over all campaigns of each seed (frames called \"go\": how many, how many got a correct fix; agreement = outcomes predicted right). The footprint rule reads feature count, valid fraction and slope texture under the frame; the rehearsal flies the flight code against the reference with frames from a draw of the terrain given its own DEM and its reported error, in the campaign's prior mode (`ground_sim::evaluation::rehearsal`):\n\n| seed | tile | map | go frames | go success | agreement |\n|---|---|---|---|---|---|"
     )?;
     for (sd, rep) in [(&seed, &report), (&seed2, &report2)] {
         for (kind, (key, method)) in ["truth", "insar"]

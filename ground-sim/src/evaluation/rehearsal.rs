@@ -235,12 +235,31 @@ impl ErrorModel {
     /// `tile.json` (`sqrt(smoothing_m² − smoothing_applied_m²)`; 0 without the file). A DEM
     /// blurred more than the tile's target smoothing had none applied, and its blur reads as
     /// the target: an underestimate (not the case for any map the project's chain makes).
+    /// Refuses an InSAR folder whose `report.json` predates the bound through the DEM filter.
     pub fn load(dir: &Path) -> anyhow::Result<Self> {
         let crlb = dir.join(crate::insar::products::CRLB_FILE);
         let sigma = crlb
             .exists()
             .then(|| read_geotiff(&crlb).with_context(|| format!("reading {}", crlb.display())))
             .transpose()?;
+        // A product made before the bound followed the DEM filter (session 24) reports 1.81×
+        // its noise; its report lacks the filter's factor. Drawing that would be 3.3× the
+        // variance, silently.
+        let report = dir.join("report.json");
+        if sigma.is_some() && report.exists() {
+            let t = std::fs::read_to_string(&report)
+                .with_context(|| format!("reading {}", report.display()))?;
+            let v: serde_json::Value = serde_json::from_str(&t)
+                .with_context(|| format!("parsing {}", report.display()))?;
+            if v.get("crlb_filter_factor").is_none() {
+                bail!(
+                    "{}: this InSAR product predates the height bound that follows the DEM \
+                     filter (its {} is about 1.8× its noise); rerun `ground-sim insar` for it",
+                    dir.display(),
+                    crate::insar::products::CRLB_FILE
+                );
+            }
+        }
         let meta = dir.join(crate::reference::META_FILE);
         let blur_m = if meta.exists() {
             let t = std::fs::read_to_string(&meta)
@@ -309,7 +328,8 @@ pub fn plausible_truth(dem: &Dem, error: &ErrorModel, seed: u64) -> anyhow::Resu
 
 /// [`plausible_truth`]'s draw on a hole-free `w × h` field `z`: the Wiener estimate of the
 /// terrain under a stationary error of variance `noise_var` (Gaussian-correlated, σ `blur_px`
-/// pixels; 0: white) plus a draw of the posterior variance.
+/// pixels; 0: white) plus a draw of the posterior variance. Memory: three complex grids of the
+/// mirrored size at once, ≈ 200 B per map cell (0.8 GB for a 2048² map).
 fn posterior_draw(
     z: &[f64],
     w: usize,
@@ -405,7 +425,8 @@ fn fft2(data: &mut [rustfft::num_complex::Complex64], w: usize, h: usize, invers
 }
 
 /// Rehearse the map: fly `spec.frames_per_site` frames at every site against `tile` (with
-/// `config`, the flight code's), from `dem` (the reference DEM) plus a draw of `error`.
+/// `config`, the flight code's), from a draw of the terrain given `dem` (the reference DEM)
+/// and its `error` ([`plausible_truth`]).
 /// `campaign` gives the sensor, pixel range, prior and budget (its trial count and seed are
 /// not used).
 pub fn rehearse(

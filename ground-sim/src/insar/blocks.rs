@@ -517,14 +517,18 @@ fn read_block(
             path.display()
         )
     })?;
-    let record: BlockRecord =
+    // The version first: an older block lacks fields, and "missing field" would hide why.
+    let value: serde_json::Value =
         serde_json::from_str(&text).with_context(|| format!("reading {}", path.display()))?;
+    let version = value["version"].as_u64();
     ensure!(
-        record.version == BLOCK_FORMAT_VERSION,
-        "{}: block format {} (this build reads {BLOCK_FORMAT_VERSION})",
+        version == Some(u64::from(BLOCK_FORMAT_VERSION)),
+        "{}: block format {} (this build reads {BLOCK_FORMAT_VERSION}): rerun that block",
         path.display(),
-        record.version
+        version.map_or("unknown".into(), |v| v.to_string())
     );
+    let record: BlockRecord =
+        serde_json::from_value(value).with_context(|| format!("reading {}", path.display()))?;
     ensure!(
         record.digest == digest,
         "{}: made from another DEM or other settings (digest {} ≠ {digest}); rerun that block",

@@ -263,8 +263,9 @@ pub struct InsarProduct {
     /// Equivalent independent looks of one window, times the stacked passes
     /// ([`InsarConfig::passes`]).
     pub effective_looks: f64,
-    /// Factor, 0–1, by which the DEM filter shrank the height CRLB of every cell
-    /// ([`dem_filter_noise_factor`]; 1 without the filter).
+    /// Factor, 0–1, by which the DEM filter shrank the height CRLB of every cell whose filter
+    /// kernel lay on valid cells ([`dem_filter_noise_factor`]; 1 without the filter). Cells by
+    /// a hole or the edge have their own ([`dem_filter_noise_factors`]).
     pub crlb_filter_factor: f64,
     /// Coregistration figures.
     pub coreg: CoregReport,
@@ -339,11 +340,14 @@ pub struct LookFusion {
     #[serde(default)]
     pub west_cycles_shifted: i64,
     /// Largest share of one-look cells among the valid cells of any square window of
-    /// [`ONE_LOOK_WINDOW_M`] on the grid (windows at least half valid), 0–1: what the frame
-    /// over the most one-look ground carries ([`LookFusion::one_look_share_for_frames`]). NaN
-    /// when not known (reports before session 24; a grid smaller than the window takes the
-    /// whole map's share). For a map in blocks: the largest of its blocks'.
-    #[serde(default = "nan")]
+    /// [`ONE_LOOK_WINDOW_M`] on the grid (windows at least half valid; clipped to a narrower
+    /// grid), 0–1: what the frame over the most one-look ground carries
+    /// ([`LookFusion::one_look_share_for_frames`]). NaN when not known (reports before session
+    /// 24, or no valid cell). For a map in blocks: the largest of its blocks'.
+    #[serde(
+        default = "nan",
+        deserialize_with = "crate::evaluation::shard::f64_or_nan"
+    )]
     pub worst_window_one_look_share: f64,
 }
 
@@ -767,6 +771,7 @@ pub fn process_stack(
             })
             .collect()
     };
+    let heights_before_filter = heights.clone();
     if cfg.dem_filter_sigma_px > 0.0 {
         heights = gaussian_filter(&heights, grid.width, grid.height, cfg.dem_filter_sigma_px);
     }
@@ -774,24 +779,47 @@ pub fn process_stack(
     let coherence = grid.raster(masked(&geo.channels[1]))?;
     // The bound follows the heights through the DEM filter: it averages noise that is
     // correlated over the multilook windows' overlap, not white (`dem_filter_noise_factor`).
+    let lags = [
+        grid.pixel_m / (g.azimuth_spacing_m * w.step as f64),
+        grid.pixel_m / ml_ground_m,
+    ];
+    let oversampling = [cfg.azimuth_oversampling, cfg.range_oversampling];
     let crlb_filter_factor = if cfg.dem_filter_sigma_px > 0.0 {
         dem_filter_noise_factor(
             cfg.dem_filter_sigma_px,
             w.size,
             w.step,
-            [
-                grid.pixel_m / (g.azimuth_spacing_m * w.step as f64),
-                grid.pixel_m / ml_ground_m,
-            ],
-            [cfg.azimuth_oversampling, cfg.range_oversampling],
+            lags,
+            oversampling,
             cfg.hamming_alpha,
         )
     } else {
         1.0
     };
+    // Per cell: a kernel cut by a hole or the edge averages less.
+    let factors = if cfg.dem_filter_sigma_px > 0.0 {
+        let valid: Vec<bool> = heights_before_filter
+            .iter()
+            .map(|v| v.is_finite())
+            .collect();
+        dem_filter_noise_factors(
+            &valid,
+            grid.width,
+            grid.height,
+            cfg.dem_filter_sigma_px,
+            w.size,
+            w.step,
+            lags,
+            oversampling,
+            cfg.hamming_alpha,
+        )
+    } else {
+        vec![1.0; geo.channels[2].len()]
+    };
     let sig_filtered: Vec<f64> = geo.channels[2]
         .iter()
-        .map(|&v| v * crlb_filter_factor)
+        .zip(&factors)
+        .map(|(&v, &f)| v * f)
         .collect();
     let crlb_m = grid.raster(masked(&sig_filtered))?;
     let mask = MaskFractions::of(&out_labels);
@@ -911,8 +939,9 @@ pub fn recentre_heights(
 /// multiplied over both, with `w` the filter's normalised weights and `ρ` the noise correlation
 /// of neighbouring cells ([`multilook_noise_correlation`] of a `size`-sample window moved
 /// `step` samples per radar pixel, at `lag_per_px[axis]` radar pixels per output pixel;
-/// azimuth first, then range, each with its `oversampling`). White noise would shrink by
-/// `Σ w²` per axis (0.28 at 1 px); the overlap of the looks keeps more. For the default chain
+/// azimuth first, then range, each with its `oversampling`), each axis's term being
+/// `sqrt(Σ_ij w_i w_j ρ(i − j)) / Σ w`. White noise would keep `sqrt(Σ w²) / Σ w` = 0.53 per
+/// axis at 1 px, 0.28 over both; the overlap of the looks keeps more. For the default chain
 /// (8-sample windows, step 4, 2× oversampling, radar pixels of the 20 m grid) it is 0.55,
 /// and the correlation it predicts after the filter, 0.84 at one cell and 0.49 at two, is
 /// what the suite's InSAR height errors show (0.80–0.82 and 0.46–0.53; [`crate::evaluation::rehearsal::ErrorModel`]).
@@ -924,39 +953,142 @@ pub fn dem_filter_noise_factor(
     oversampling: [f64; 2],
     alpha: f64,
 ) -> f64 {
-    if !(sigma_px > 0.0 && sigma_px.is_finite()) {
+    let Some(t) = FilterNoise::new(sigma_px, size, step, lag_per_px, oversampling, alpha) else {
         return 1.0;
-    }
-    let r = (3.0 * sigma_px).ceil() as usize;
-    let k: Vec<f64> = (0..=2 * r)
-        .map(|i| {
-            let d = i as f64 - r as f64;
-            (-d * d / (2.0 * sigma_px * sigma_px)).exp()
-        })
-        .collect();
-    let total: f64 = k.iter().sum();
+    };
+    let total: f64 = t.kernel.iter().sum();
     let mut factor = 1.0;
-    for axis in 0..2 {
-        let rho: Vec<f64> = (0..=2 * r)
-            .map(|d| {
-                multilook_noise_correlation(
-                    size,
-                    step,
-                    d as f64 * lag_per_px[axis],
-                    oversampling[axis],
-                    alpha,
-                )
-            })
-            .collect();
+    for rho in &t.rho {
         let mut var = 0.0;
-        for (i, a) in k.iter().enumerate() {
-            for (j, b) in k.iter().enumerate() {
+        for (i, a) in t.kernel.iter().enumerate() {
+            for (j, b) in t.kernel.iter().enumerate() {
                 var += a * b * rho[i.abs_diff(j)];
             }
         }
         factor *= var.max(0.0).sqrt() / total;
     }
-    factor
+    if factor.is_finite() { factor } else { 1.0 }
+}
+
+/// [`dem_filter_noise_factor`] per cell of a `w × h` grid (rows azimuth, columns range) whose
+/// `valid` cells the filter averaged: [`gaussian_filter`] renormalises a kernel cut by holes
+/// or the grid's edge, and such a cell averages differently, mostly less (default chain: 0.63
+/// at a straight edge, 0.72 at a corner, 1 for a cell alone). Cells whose kernel lies on valid
+/// cells only take the full factor; the others sum their kernel's valid part. 1 everywhere
+/// without a filter.
+#[allow(clippy::too_many_arguments)]
+pub fn dem_filter_noise_factors(
+    valid: &[bool],
+    w: usize,
+    h: usize,
+    sigma_px: f64,
+    size: usize,
+    step: usize,
+    lag_per_px: [f64; 2],
+    oversampling: [f64; 2],
+    alpha: f64,
+) -> Vec<f64> {
+    let n = (w * h).min(valid.len());
+    let Some(t) = FilterNoise::new(sigma_px, size, step, lag_per_px, oversampling, alpha) else {
+        return vec![1.0; n];
+    };
+    let full = dem_filter_noise_factor(sigma_px, size, step, lag_per_px, oversampling, alpha);
+    let r = t.kernel.len() / 2;
+    let side = 2 * r + 1;
+    // Valid cells within each cell's kernel footprint (summed-area table).
+    let mut table = vec![0u32; (w + 1) * (h + 1)];
+    for y in 0..h {
+        let mut run = 0u32;
+        for x in 0..w {
+            run += u32::from(y * w + x < n && valid[y * w + x]);
+            table[(y + 1) * (w + 1) + x + 1] = table[y * (w + 1) + x + 1] + run;
+        }
+    }
+    let count = |y: usize, x: usize| -> usize {
+        let (y0, y1) = (y.saturating_sub(r), (y + r + 1).min(h));
+        let (x0, x1) = (x.saturating_sub(r), (x + r + 1).min(w));
+        let at = |yy: usize, xx: usize| i64::from(table[yy * (w + 1) + xx]);
+        (at(y1, x1) - at(y0, x1) - at(y1, x0) + at(y0, x0)) as usize
+    };
+    (0..n)
+        .into_par_iter()
+        .map(|i| {
+            let (y, x) = (i / w, i % w);
+            if count(y, x) == side * side {
+                return full;
+            }
+            // The kernel's valid cells, with their weights.
+            let mut cells: Vec<(usize, usize, f64)> = Vec::with_capacity(side * side);
+            for dy in 0..side {
+                let yy = y as i64 + dy as i64 - r as i64;
+                if yy < 0 || yy >= h as i64 {
+                    continue;
+                }
+                for dx in 0..side {
+                    let xx = x as i64 + dx as i64 - r as i64;
+                    if xx < 0 || xx >= w as i64 || !valid[yy as usize * w + xx as usize] {
+                        continue;
+                    }
+                    cells.push((dy, dx, t.kernel[dy] * t.kernel[dx]));
+                }
+            }
+            let total: f64 = cells.iter().map(|c| c.2).sum();
+            let mut var = 0.0;
+            for a in &cells {
+                for b in &cells {
+                    var += a.2 * b.2 * t.rho[0][a.0.abs_diff(b.0)] * t.rho[1][a.1.abs_diff(b.1)];
+                }
+            }
+            let f = var.max(0.0).sqrt() / total;
+            if f.is_finite() { f } else { 1.0 }
+        })
+        .collect()
+}
+
+/// The filter's 1-D kernel and the noise correlation per axis at its lags.
+struct FilterNoise {
+    kernel: Vec<f64>,
+    /// Azimuth, range: correlation at lag 0..=2r output pixels.
+    rho: [Vec<f64>; 2],
+}
+
+impl FilterNoise {
+    fn new(
+        sigma_px: f64,
+        size: usize,
+        step: usize,
+        lag_per_px: [f64; 2],
+        oversampling: [f64; 2],
+        alpha: f64,
+    ) -> Option<Self> {
+        let usable = sigma_px > 0.0
+            && sigma_px < 1e3
+            && lag_per_px.iter().all(|l| l.is_finite() && *l >= 0.0);
+        if !usable {
+            return None;
+        }
+        let r = (3.0 * sigma_px).ceil() as usize;
+        let kernel: Vec<f64> = (0..=2 * r)
+            .map(|i| {
+                let d = i as f64 - r as f64;
+                (-d * d / (2.0 * sigma_px * sigma_px)).exp()
+            })
+            .collect();
+        let rho = [0, 1].map(|axis| {
+            (0..=2 * r)
+                .map(|d| {
+                    multilook_noise_correlation(
+                        size,
+                        step,
+                        d as f64 * lag_per_px[axis],
+                        oversampling[axis],
+                        alpha,
+                    )
+                })
+                .collect()
+        });
+        Some(Self { kernel, rho })
+    }
 }
 
 /// Gaussian filter of standard deviation `sigma_px` (kernel cut at 3σ) over the finite values
@@ -1289,9 +1421,10 @@ pub fn fuse_looks(east: &mut InsarProduct, west: &InsarProduct) -> anyhow::Resul
 }
 
 /// Largest share of `flag`ged cells among the `valid` cells of any `side_px`-cell square
-/// window of a row-major `w`-wide grid (windows less than half valid are skipped); the whole
-/// grid's share when no window fits or qualifies; NaN when nothing is valid. Summed-area
-/// tables: linear in the grid whatever the window.
+/// window of a row-major `w`-wide grid (windows less than half valid are skipped; on a grid
+/// narrower than the window, windows as wide as the grid); the whole grid's share when no
+/// window qualifies; NaN when nothing is valid. Summed-area tables: linear in the grid
+/// whatever the window.
 pub fn worst_window_share(flag: &[bool], valid: &[bool], w: usize, side_px: f64) -> f64 {
     let n = valid.len().min(flag.len());
     let h = n / w.max(1);
@@ -1305,13 +1438,15 @@ pub fn worst_window_share(flag: &[bool], valid: &[bool], w: usize, side_px: f64)
         }
     };
     let k = if side_px.is_finite() {
-        side_px.round().max(1.0) as usize
+        side_px.round().clamp(1.0, 1e9) as usize
     } else {
         0
     };
-    if w == 0 || k == 0 || k > w || k > h {
+    if w == 0 || h == 0 || k == 0 {
         return whole;
     }
+    // A map narrower than the window (a corridor strip) scans windows as wide as it is.
+    let (kx, ky) = (k.min(w), k.min(h));
     // table[(r)(w+1) + c] = count over rows < r, columns < c.
     let table = |cell: &dyn Fn(usize) -> bool| -> Vec<u32> {
         let mut t = vec![0u32; (w + 1) * (h + 1)];
@@ -1328,13 +1463,13 @@ pub fn worst_window_share(flag: &[bool], valid: &[bool], w: usize, side_px: f64)
     let tf = table(&|i| valid[i] && flag[i]);
     let sum = |t: &[u32], r: usize, c: usize| {
         let at = |rr: usize, cc: usize| i64::from(t[rr * (w + 1) + cc]);
-        at(r + k, c + k) - at(r, c + k) - at(r + k, c) + at(r, c)
+        at(r + ky, c + kx) - at(r, c + kx) - at(r + ky, c) + at(r, c)
     };
     let mut worst = f64::NAN;
-    for r in 0..=h - k {
-        for c in 0..=w - k {
+    for r in 0..=h - ky {
+        for c in 0..=w - kx {
             let v = sum(&tv, r, c);
-            if 2 * v < (k * k) as i64 {
+            if 2 * v < (kx * ky) as i64 {
                 continue;
             }
             let share = sum(&tf, r, c) as f64 / v as f64;

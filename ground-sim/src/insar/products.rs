@@ -73,8 +73,10 @@ pub struct InsarReport {
     pub tile: TileSummary,
     /// Equivalent independent looks of one multilook window, times the stacked passes.
     pub effective_looks: f64,
-    /// Factor, 0–1, by which the DEM filter shrank every cell's height CRLB (the looks'
-    /// overlap keeps their noise correlated; `pipeline::dem_filter_noise_factor`).
+    /// Factor, 0–1, by which the DEM filter shrank the height CRLB of cells away from holes
+    /// and edges (the looks' overlap keeps their noise correlated;
+    /// `pipeline::dem_filter_noise_factor`; cells by a hole or the edge have their own,
+    /// mostly larger).
     pub crlb_filter_factor: f64,
     /// Height of ambiguity at the scene centre, m per 2π.
     pub height_of_ambiguity_m: f64,

@@ -205,8 +205,8 @@ fn a_second_look_maps_the_wall_the_first_has_in_layover() {
         (fused - full * share as f32).abs() < 1e-5,
         "{fused} vs {full}"
     );
-    // The scene is smaller than a frame's 2 km window: the frames' share is the map's.
-    assert_eq!(f.one_look_share_for_frames(), share);
+    // The scene is smaller than a frame's 2 km window: the one window is the map.
+    assert!((f.one_look_share_for_frames() - share).abs() < 1e-9);
     assert_eq!(crate::reference::reference_sigma_m(22.4, 0.0), [0.0; 2]);
     // A one-look map, or an unknown share, claims the whole blur term.
     assert_eq!(
@@ -864,11 +864,13 @@ fn the_frames_share_of_one_look_cells_is_the_worst_windows() {
     // Map-wide half the cells; a 20-cell window inside the west half has nothing else.
     assert!((worst_window_share(&flag, &valid, w, 40.0) - 0.5).abs() < 1e-12);
     assert!((worst_window_share(&flag, &valid, w, 20.0) - 1.0).abs() < 1e-12);
-    // A window between the two: 10 of its 30 columns.
+    // A window between the two: 20 of its 30 columns.
     assert!((worst_window_share(&flag, &valid, w, 30.0) - 20.0 / 30.0).abs() < 1e-12);
     // Larger than the grid, or not a size: the whole map's share.
     assert!((worst_window_share(&flag, &valid, w, 100.0) - 0.5).abs() < 1e-12);
     assert!((worst_window_share(&flag, &valid, w, f64::NAN) - 0.5).abs() < 1e-12);
+    // A strip 10 cells high: windows as high as the strip, the west half still all one look.
+    assert!((worst_window_share(&flag[..400], &valid[..400], w, 20.0) - 1.0).abs() < 1e-12);
     // Mostly holes: a window less than half valid does not speak. Only rows 0–4 of the west
     // half stay valid, so a window needs 7 east columns to be half valid: 65 / 205 at most.
     for (i, v) in valid.iter_mut().enumerate() {
@@ -878,4 +880,55 @@ fn the_frames_share_of_one_look_cells_is_the_worst_windows() {
     assert!((s - 65.0 / 205.0).abs() < 1e-12, "{s}");
     // Nothing valid: unknown.
     assert!(worst_window_share(&flag, &[false; 1600], w, 20.0).is_nan());
+}
+
+#[test]
+fn the_dem_filter_shrinks_the_bound_by_what_the_looks_do_not_share() {
+    use super::pipeline::{dem_filter_noise_factor, dem_filter_noise_factors};
+    // White noise (Nyquist-sampled rectangular spectrum, windows that do not overlap): the
+    // filter keeps sqrt(Σw²)/Σw per axis, 0.282 over both at 1 px.
+    let k: Vec<f64> = (-3..=3)
+        .map(|d: i32| (-f64::from(d * d) / 2.0).exp())
+        .collect();
+    let white = k.iter().map(|v| v * v).sum::<f64>() / k.iter().sum::<f64>().powi(2);
+    let f = dem_filter_noise_factor(1.0, 4, 4, [1.0, 1.0], [1.0, 1.0], 1.0);
+    assert!(
+        (f - white).abs() < 2e-3 && (white - 0.282).abs() < 1e-3,
+        "{f} {white}"
+    );
+    // The default chain's overlapping looks keep more: 0.553.
+    let d = dem_filter_noise_factor(1.0, 8, 4, [1.0, 1.0], [2.0, 2.0], 0.54);
+    assert!((d - 0.553).abs() < 2e-3, "{d}");
+    // No filter, or nonsense lags: the bound as it was.
+    assert_eq!(
+        dem_filter_noise_factor(0.0, 8, 4, [1.0, 1.0], [2.0, 2.0], 0.54),
+        1.0
+    );
+    assert_eq!(
+        dem_filter_noise_factor(1.0, 8, 4, [f64::NAN, 1.0], [2.0, 2.0], 0.54),
+        1.0
+    );
+    // Per cell: inside, the full factor; at the edge the kernel is cut and keeps more, at a
+    // corner more still; a cell alone within its kernel keeps its whole bound.
+    let (w, h) = (20, 20);
+    let mut valid = vec![true; w * h];
+    for r in 12..19 {
+        for c in 12..19 {
+            valid[r * w + c] = (r, c) == (15, 15);
+        }
+    }
+    let fs = dem_filter_noise_factors(&valid, w, h, 1.0, 8, 4, [1.0, 1.0], [2.0, 2.0], 0.54);
+    assert!(
+        (fs[6 * w + 6] - d).abs() < 1e-12,
+        "inside {}",
+        fs[6 * w + 6]
+    );
+    let (edge, corner) = (fs[6 * w], fs[0]);
+    assert!(
+        edge > d + 0.05 && corner > edge + 0.05 && corner < 1.0,
+        "{edge} {corner}"
+    );
+    assert!((fs[15 * w + 15] - 1.0).abs() < 1e-12, "{}", fs[15 * w + 15]);
+    let alone = dem_filter_noise_factors(&[true], 1, 1, 1.0, 8, 4, [1.0, 1.0], [2.0, 2.0], 0.54);
+    assert!((alone[0] - 1.0).abs() < 1e-12, "{alone:?}");
 }
