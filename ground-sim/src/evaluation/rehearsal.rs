@@ -650,4 +650,29 @@ mod tests {
         };
         assert!(plausible_truth(&map, &bad, 3).is_err());
     }
+
+    #[test]
+    fn an_insar_folder_whose_bound_predates_the_filter_is_refused() {
+        use crate::dem::{GeoRef, write_geotiff};
+        let dir = tempfile::tempdir().unwrap();
+        let sigma = Dem::new(4, 4, vec![1.0f32; 16], GeoRef::local(0.0, 0.0, 20.0, "t")).unwrap();
+        write_geotiff(
+            &sigma,
+            &dir.path().join(crate::insar::products::CRLB_FILE),
+            None,
+        )
+        .unwrap();
+        // Without a report: nothing tells, the bound is taken as it is.
+        assert!(ErrorModel::load(dir.path()).unwrap().sigma.is_some());
+        let report = dir.path().join("report.json");
+        std::fs::write(&report, r#"{"height_rmse_m": 1.0}"#).unwrap();
+        let e = ErrorModel::load(dir.path()).unwrap_err().to_string();
+        assert!(e.contains("rerun `ground-sim insar`"), "{e}");
+        std::fs::write(
+            &report,
+            r#"{"height_rmse_m": 1.0, "crlb_filter_factor": 0.553}"#,
+        )
+        .unwrap();
+        assert!(ErrorModel::load(dir.path()).is_ok());
+    }
 }
