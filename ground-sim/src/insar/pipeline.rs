@@ -771,7 +771,6 @@ pub fn process_stack(
             })
             .collect()
     };
-    let heights_before_filter = heights.clone();
     if cfg.dem_filter_sigma_px > 0.0 {
         heights = gaussian_filter(&heights, grid.width, grid.height, cfg.dem_filter_sigma_px);
     }
@@ -783,39 +782,20 @@ pub fn process_stack(
         grid.pixel_m / (g.azimuth_spacing_m * w.step as f64),
         grid.pixel_m / ml_ground_m,
     ];
-    let oversampling = [cfg.azimuth_oversampling, cfg.range_oversampling];
-    let crlb_filter_factor = if cfg.dem_filter_sigma_px > 0.0 {
-        dem_filter_noise_factor(
-            cfg.dem_filter_sigma_px,
-            w.size,
-            w.step,
-            lags,
-            oversampling,
-            cfg.hamming_alpha,
-        )
-    } else {
-        1.0
-    };
-    // Per cell: a kernel cut by a hole or the edge averages less.
-    let factors = if cfg.dem_filter_sigma_px > 0.0 {
-        let valid: Vec<bool> = heights_before_filter
-            .iter()
-            .map(|v| v.is_finite())
-            .collect();
-        dem_filter_noise_factors(
-            &valid,
-            grid.width,
-            grid.height,
-            cfg.dem_filter_sigma_px,
-            w.size,
-            w.step,
-            lags,
-            oversampling,
-            cfg.hamming_alpha,
-        )
-    } else {
-        vec![1.0; geo.channels[2].len()]
-    };
+    // Per cell: a kernel cut by a hole or the edge averages differently. The filter keeps
+    // NaN as NaN, so the filtered heights tell which cells it averaged.
+    let valid: Vec<bool> = heights.iter().map(|v| v.is_finite()).collect();
+    let (crlb_filter_factor, factors) = dem_filter_noise_factors(
+        &valid,
+        grid.width,
+        grid.height,
+        cfg.dem_filter_sigma_px,
+        w.size,
+        w.step,
+        lags,
+        [cfg.azimuth_oversampling, cfg.range_oversampling],
+        cfg.hamming_alpha,
+    );
     let sig_filtered: Vec<f64> = geo.channels[2]
         .iter()
         .zip(&factors)
@@ -974,8 +954,8 @@ pub fn dem_filter_noise_factor(
 /// `valid` cells the filter averaged: [`gaussian_filter`] renormalises a kernel cut by holes
 /// or the grid's edge, and such a cell averages differently, mostly less (default chain: 0.63
 /// at a straight edge, 0.72 at a corner, 1 for a cell alone). Cells whose kernel lies on valid
-/// cells only take the full factor; the others sum their kernel's valid part. 1 everywhere
-/// without a filter.
+/// cells only take the full factor; the others sum their kernel's valid part. Returns that full
+/// factor and the per-cell ones (1 everywhere without a filter).
 #[allow(clippy::too_many_arguments)]
 pub fn dem_filter_noise_factors(
     valid: &[bool],
@@ -987,10 +967,10 @@ pub fn dem_filter_noise_factors(
     lag_per_px: [f64; 2],
     oversampling: [f64; 2],
     alpha: f64,
-) -> Vec<f64> {
+) -> (f64, Vec<f64>) {
     let n = (w * h).min(valid.len());
     let Some(t) = FilterNoise::new(sigma_px, size, step, lag_per_px, oversampling, alpha) else {
-        return vec![1.0; n];
+        return (1.0, vec![1.0; n]);
     };
     let full = dem_filter_noise_factor(sigma_px, size, step, lag_per_px, oversampling, alpha);
     let r = t.kernel.len() / 2;
@@ -1010,7 +990,7 @@ pub fn dem_filter_noise_factors(
         let at = |yy: usize, xx: usize| i64::from(table[yy * (w + 1) + xx]);
         (at(y1, x1) - at(y0, x1) - at(y1, x0) + at(y0, x0)) as usize
     };
-    (0..n)
+    let per_cell = (0..n)
         .into_par_iter()
         .map(|i| {
             let (y, x) = (i / w, i % w);
@@ -1042,7 +1022,8 @@ pub fn dem_filter_noise_factors(
             let f = var.max(0.0).sqrt() / total;
             if f.is_finite() { f } else { 1.0 }
         })
-        .collect()
+        .collect();
+    (full, per_cell)
 }
 
 /// The filter's 1-D kernel and the noise correlation per axis at its lags.

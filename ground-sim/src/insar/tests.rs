@@ -917,7 +917,9 @@ fn the_dem_filter_shrinks_the_bound_by_what_the_looks_do_not_share() {
             valid[r * w + c] = (r, c) == (15, 15);
         }
     }
-    let fs = dem_filter_noise_factors(&valid, w, h, 1.0, 8, 4, [1.0, 1.0], [2.0, 2.0], 0.54);
+    let (full, fs) =
+        dem_filter_noise_factors(&valid, w, h, 1.0, 8, 4, [1.0, 1.0], [2.0, 2.0], 0.54);
+    assert!((full - d).abs() < 1e-12);
     assert!(
         (fs[6 * w + 6] - d).abs() < 1e-12,
         "inside {}",
@@ -929,6 +931,7 @@ fn the_dem_filter_shrinks_the_bound_by_what_the_looks_do_not_share() {
         "{edge} {corner}"
     );
     assert!((fs[15 * w + 15] - 1.0).abs() < 1e-12, "{}", fs[15 * w + 15]);
-    let alone = dem_filter_noise_factors(&[true], 1, 1, 1.0, 8, 4, [1.0, 1.0], [2.0, 2.0], 0.54);
+    let (_, alone) =
+        dem_filter_noise_factors(&[true], 1, 1, 1.0, 8, 4, [1.0, 1.0], [2.0, 2.0], 0.54);
     assert!((alone[0] - 1.0).abs() < 1e-12, "{alone:?}");
 }
