@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use ground_sim::dem::read_geotiff;
 use ground_sim::insar::pipeline::{
-    LookDirections, process_simulated, process_slcs, run_from_dem_looks,
+    DemFilterKind, LookDirections, process_simulated, process_slcs, run_from_dem_looks,
 };
 use ground_sim::insar::products::{InsarReport, RunContext, SarSummary, write_outputs};
 use ground_sim::insar::{InsarConfig, blocks, label};
@@ -36,9 +36,15 @@ pub struct Args {
     /// Coherence below which heights are dropped.
     #[arg(long, default_value_t = InsarConfig::default().min_coherence)]
     pub min_coherence: f64,
-    /// Gaussian filter of the geocoded DEM, standard deviation in output pixels (0 = none).
-    #[arg(long, default_value_t = InsarConfig::default().dem_filter_sigma_px)]
-    pub dem_filter_sigma_px: f64,
+    /// Filter of the geocoded DEM: `gaussian` (the weighted mean) or `quadratic` (a local
+    /// quadratic fit under Gaussian weights: no curvature bias, height and slope RMSE lower on
+    /// every suite scene, but tiles not yet better for TRN; docs/insar.md).
+    #[arg(long, value_enum, default_value_t = InsarConfig::default().dem_filter)]
+    pub dem_filter: DemFilterKind,
+    /// σ of the DEM filter's Gaussian weights, output pixels (0 = no filter). Default: the
+    /// kernel's (2 for `quadratic`, 1 for `gaussian`).
+    #[arg(long)]
+    pub dem_filter_sigma_px: Option<f64>,
     /// Passes of the speckle-centroid correction (each halves the remaining shift; 0 = the
     /// paper's chain, heights at the window centres).
     #[arg(long, default_value_t = InsarConfig::default().recentre_passes)]
@@ -138,7 +144,10 @@ pub fn run_chain(a: &Args) -> anyhow::Result<Outcome> {
         pixel_m: a.pixel_m,
         min_coherence: a.min_coherence,
         unwrap: !a.no_unwrap,
-        dem_filter_sigma_px: a.dem_filter_sigma_px,
+        dem_filter: a.dem_filter,
+        dem_filter_sigma_px: a
+            .dem_filter_sigma_px
+            .unwrap_or_else(|| a.dem_filter.default_sigma_px()),
         recentre_passes: a.recentre_passes,
         shadow_below_median_db: a.shadow_below_median_db,
         prior_dem_cell_m: a.prior_dem_cell_m,

@@ -68,6 +68,10 @@ pub struct Args {
     /// independent per pass, the same ground; each pass adds its SAR time).
     #[arg(long, default_value_t = 1)]
     pub passes: usize,
+    /// Kernel of the InSAR tiles' DEM filter, at its default σ (`quadratic`: the local
+    /// quadratic fit at 2 px; docs/insar.md, "A filter without curvature bias").
+    #[arg(long, value_enum, default_value_t = ground_sim::insar::InsarConfig::default().dem_filter)]
+    pub dem_filter: ground_sim::insar::pipeline::DemFilterKind,
     /// Spacing of the navigability map's rehearsal sites, metres (0: no rehearsal, the
     /// footprint rule only).
     #[arg(long, default_value_t = REHEARSAL_STEP_M)]
@@ -166,6 +170,7 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         polarisation,
         looks: super::insar::looks_or_preset(a.looks, &a.radar),
         passes: a.passes,
+        dem_filter: a.dem_filter,
         navmap: NavmapThresholds::default(),
         rehearsal,
         budget: a.budget.budget,

@@ -213,6 +213,7 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
             polarisation: Polarisation::HH,
             looks,
             passes,
+            dem_filter: Default::default(),
             navmap: NavmapThresholds::default(),
             rehearsal: None,
             budget: a.budget.budget,

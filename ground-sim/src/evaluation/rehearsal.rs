@@ -209,11 +209,11 @@ impl Rehearsal {
 
 /// The map's own height error as the reference folder states it: per-cell 1σ (the InSAR
 /// product's Cramér–Rao bound, `height-crlb.tif`; none for a truth-built map) and its
-/// correlation, a Gaussian of the DEM's own blur (what the tile builder recorded as the
-/// smoothing the DEM already had: an InSAR DEM's multilook window, through which its noise
-/// passed like its signal). Measured on the suite's InSAR height-error maps (plains and lola,
-/// both seeds): neighbour correlation 0.80–0.82 at 20 m, 0.46–0.53 at 40 m, against 0.78 and
-/// 0.37 for a Gaussian of the recorded 22.4 m blur.
+/// correlation, a Gaussian blur of white noise: the DEM's own blur that the tile builder
+/// recorded (the default chain's multilook window and 1 px mean, 22.4 m, through which its
+/// noise passed like its signal: 0.82 at 20 m, where the suite's InSAR height-error maps
+/// of the plains and lola read 0.81–0.83), or, for a DEM made with the quadratic filter, whose
+/// signal blur (10 m) is not its noise's, the product's `error_blur_m` (30.4 m at 2 px).
 #[derive(Debug, Clone)]
 pub struct ErrorModel {
     /// Height 1σ per cell, metres, on the reference DEM's grid (`None`: the map claims none).
@@ -231,8 +231,10 @@ impl ErrorModel {
         }
     }
 
-    /// Read it from a reference folder: `height-crlb.tif` when present, the blur from
-    /// `tile.json` (`sqrt(smoothing_m² − smoothing_applied_m²)`; 0 without the file). A DEM
+    /// Read it from a reference folder: `height-crlb.tif` when present; the blur from
+    /// `report.json`'s `error_blur_m` when it states one (the quadratic DEM filter), else from
+    /// `tile.json` (`sqrt(smoothing_m² − smoothing_applied_m²)`, the DEM's signal blur, the
+    /// noise's too under the mean; 0 without the file). A DEM
     /// blurred more than the tile's target smoothing had none applied, and its blur reads as
     /// the target: an underestimate (not the case for any map the project's chain makes).
     /// Refuses an InSAR folder whose `report.json` predates the bound through the DEM filter.
@@ -246,11 +248,13 @@ impl ErrorModel {
         // its noise; its report lacks the filter's factor. Drawing that would be 3.3× the
         // variance, silently.
         let report = dir.join("report.json");
+        let mut reported_blur = None;
         if sigma.is_some() && report.exists() {
             let t = std::fs::read_to_string(&report)
                 .with_context(|| format!("reading {}", report.display()))?;
             let v: serde_json::Value = serde_json::from_str(&t)
                 .with_context(|| format!("parsing {}", report.display()))?;
+            reported_blur = v.get("error_blur_m").and_then(|b| b.as_f64());
             if v.get("crlb_filter_factor").is_none() {
                 bail!(
                     "{}: this InSAR product predates the height bound that follows the DEM \
@@ -261,7 +265,9 @@ impl ErrorModel {
             }
         }
         let meta = dir.join(crate::reference::META_FILE);
-        let blur_m = if meta.exists() {
+        let blur_m = if let Some(b) = reported_blur.filter(|b| b.is_finite() && *b >= 0.0) {
+            b
+        } else if meta.exists() {
             let t = std::fs::read_to_string(&meta)
                 .with_context(|| format!("reading {}", meta.display()))?;
             let v: serde_json::Value =
@@ -674,5 +680,20 @@ mod tests {
         )
         .unwrap();
         assert!(ErrorModel::load(dir.path()).is_ok());
+        // The noise's own correlation length, when the product states it, over the DEM's
+        // signal blur in tile.json (which a quadratic DEM filter leaves at the window's 10 m).
+        std::fs::write(
+            dir.path().join(crate::reference::META_FILE),
+            r#"{"smoothing_m": 50.0, "smoothing_applied_m": 48.98979485566356}"#,
+        )
+        .unwrap();
+        let tile_blur = ErrorModel::load(dir.path()).unwrap().blur_m;
+        assert!((tile_blur - 10.0).abs() < 1e-6, "{tile_blur}");
+        std::fs::write(
+            &report,
+            r#"{"crlb_filter_factor": 0.50, "error_blur_m": 30.36}"#,
+        )
+        .unwrap();
+        assert_eq!(ErrorModel::load(dir.path()).unwrap().blur_m, 30.36);
     }
 }

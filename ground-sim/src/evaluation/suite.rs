@@ -192,6 +192,9 @@ pub struct SuiteSpec {
     pub looks: LookDirections,
     /// Passes of one track stacked per look ([`crate::insar::InsarConfig::passes`]; 1 = one).
     pub passes: usize,
+    /// Kernel of the InSAR chain's DEM filter, at its default σ
+    /// ([`crate::insar::pipeline::DemFilterKind::default_sigma_px`]).
+    pub dem_filter: crate::insar::pipeline::DemFilterKind,
     /// Navigability-map thresholds (the footprint rule).
     pub navmap: NavmapThresholds,
     /// The navigability map by rehearsal, per campaign's prior mode (`None`: not flown).
@@ -331,6 +334,8 @@ pub fn run_scene(
                 let cfg = InsarConfig {
                     pixel_m: spec.reference_pixel_m,
                     passes: spec.passes,
+                    dem_filter: spec.dem_filter,
+                    dem_filter_sigma_px: spec.dem_filter.default_sigma_px(),
                     ..InsarConfig::default()
                 };
                 let run = run_from_dem_looks(
@@ -666,11 +671,15 @@ fn go_cell(score: Option<&NavmapScore>) -> String {
 /// The suite's table as Markdown: one row per campaign.
 pub fn table_markdown(r: &SuiteReport) -> String {
     let mut s = format!(
-        "{} frames per campaign, campaign seed {}, navigator budget {}; InSAR tiles: {}.\n\n",
+        "{} frames per campaign, campaign seed {}, navigator budget {}; InSAR tiles: {}{}.\n\n",
         r.spec.trials,
         r.spec.seed,
         r.spec.budget.label(),
         radar_words(&r.spec.radar, r.spec.looks, r.spec.passes),
+        match r.spec.dem_filter {
+            crate::insar::pipeline::DemFilterKind::Gaussian => String::new(),
+            k => format!(", DEM filter {k:?} at {} px", k.default_sigma_px()).to_lowercase(),
+        },
     );
     s += concat!(
         "| scene | tile | prior | success | false | no fix (reasons) | pos p50 / p95 m | heading p95 ° | in 3σ | NEES | ms/frame | navmap (footprint) go: success / agree | navmap (rehearsal) go: success / agree |\n",

@@ -48,8 +48,10 @@ pub const DEFAULT_BLOCK_CELLS: usize = 400;
 /// ≈ 250 m high at 26° incidence.
 pub const DEFAULT_OVERLAP_CELLS: usize = 25;
 /// Version of the block files (`block.json`). 2: the height CRLB layer follows the DEM
-/// filter (`pipeline::dem_filter_noise_factor`), and the record carries that factor.
-pub const BLOCK_FORMAT_VERSION: u32 = 2;
+/// filter (`pipeline::dem_filter_noise_factor`), and the record carries that factor. 3: the
+/// DEM filter may be the local quadratic fit (`pipeline::DemFilterKind`, in the record's
+/// configuration), and the record carries the filtered noise's correlation length.
+pub const BLOCK_FORMAT_VERSION: u32 = 3;
 /// Folder of the block products inside an `insar` output folder.
 pub const BLOCKS_DIR: &str = "blocks";
 const BLOCK_JSON: &str = "block.json";
@@ -235,6 +237,8 @@ pub struct BlockRecord {
     pub effective_looks: f64,
     /// Factor the DEM filter shrank the height CRLB by (`InsarProduct::crlb_filter_factor`).
     pub crlb_filter_factor: f64,
+    /// Correlation length of the filtered height noise, m (`InsarProduct::error_blur_m`).
+    pub error_blur_m: f64,
     /// Coregistration figures.
     pub coreg: CoregReport,
     /// Unwrapping figures.
@@ -462,6 +466,7 @@ pub fn run_block(job: &BlockJob<'_>, index: usize) -> anyhow::Result<BlockRecord
         window_side_m,
         effective_looks: product.effective_looks,
         crlb_filter_factor: product.crlb_filter_factor,
+        error_blur_m: product.error_blur_m,
         coreg: product.coreg,
         unwrap: product.unwrap,
         mask: product.mask,
@@ -885,6 +890,7 @@ pub fn mosaic(job: &BlockJob<'_>) -> anyhow::Result<Mosaic> {
         },
         effective_looks: centre.effective_looks,
         crlb_filter_factor: centre.crlb_filter_factor,
+        error_blur_m: centre.error_blur_m,
         coreg: centre.coreg,
         unwrap,
         eq20_removed: blocks.iter().map(|b| b.record.eq20_removed).sum(),

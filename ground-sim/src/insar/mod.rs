@@ -15,10 +15,12 @@
 //! 5. [`geocode`]: each pixel's ground position from `R1` and its height (radar parallax
 //!    removed), resampling onto a regular ground grid aligned with the truth DEM, holes as
 //!    nodata with a mask code; eq 20 layover/shadow test.
-//! 6. [`accuracy`]: comparison with the truth DEM resampled to the same grid.
-//! 7. [`pipeline`]: everything above on a pair ([`process_pair`]), or from a DEM with the SAR
+//! 6. [`demfilter`]: the filter of the geocoded DEM (a Gaussian mean by default, or a local
+//!    quadratic fit without curvature bias) and what it does to the height bound.
+//! 7. [`accuracy`]: comparison with the truth DEM resampled to the same grid.
+//! 8. [`pipeline`]: everything above on a pair ([`process_pair`]), or from a DEM with the SAR
 //!    simulation inside ([`run_from_dem`]).
-//! 8. [`products`]: GeoTIFFs, the paper's Fig. 5 and 6 pictures, the reference folder (tile)
+//! 9. [`products`]: GeoTIFFs, the paper's Fig. 5 and 6 pictures, the reference folder (tile)
 //!    and `report.json`.
 //!
 //! Frames and units: the SAR frame of [`crate::sar`] (metres; `x` along track = DEM rows,
@@ -29,6 +31,7 @@ pub mod accuracy;
 pub mod blocks;
 pub mod coreg;
 pub mod cycles;
+pub mod demfilter;
 pub mod geocode;
 pub mod geometry;
 pub mod looks;

@@ -11,13 +11,15 @@ use super::coreg::{
     ResidualOffset, estimate_residual_offset, predicted_offset_gates, resample_range,
 };
 use super::cycles::{CycleChoice, CyclePrior, choose_cycles, coarse_prior};
+pub use super::demfilter::{
+    DemFilter, DemFilterKind, LookNoise, dem_filter_noise_factor, dem_filter_noise_factors,
+    error_blur_m, filter_dem, gaussian_filter,
+};
 use super::geocode::{
     GeocodeParams, OutputGrid, RadarPixels, eq20_mask, geocode, label, ray_trace_mask,
 };
 use super::geometry::{PairGeometry, wrap_rad};
-use super::looks::{
-    LookWindow, equivalent_looks_1d, multilook, multilook_noise_correlation, phase_crlb_rad,
-};
+use super::looks::{LookWindow, equivalent_looks_1d, multilook, phase_crlb_rad};
 use super::unwrap::unwrap_quality_guided;
 use super::{InsarError, InsarResult};
 use crate::dem::Dem;
@@ -51,9 +53,13 @@ pub struct InsarConfig {
     pub check_coregistration: bool,
     /// Geocoding limits.
     pub geocode: GeocodeParams,
-    /// Standard deviation of a Gaussian filter applied to the geocoded DEM, output pixels
-    /// (0 = none, the paper's processing). Default 1 px: not in the paper; it halves the
-    /// pixel-scale height noise that the slope operator amplifies (measured in
+    /// Kernel of the filter applied to the geocoded DEM ([`DemFilterKind`]). Default the
+    /// Gaussian mean; the local quadratic fit makes a better DEM but not yet a better tile
+    /// (`docs/insar.md`, "A filter without curvature bias"). Not in the paper.
+    pub dem_filter: DemFilterKind,
+    /// σ of the DEM filter's Gaussian weights, output pixels (0 = no filter, the paper's
+    /// processing). Default 1 px for the mean ([`DemFilterKind::default_sigma_px`]): it halves
+    /// the pixel-scale height noise that the slope operator amplifies (measured in
     /// `docs/insar.md`).
     pub dem_filter_sigma_px: f64,
     /// Passes of the speckle-centroid correction ([`recentre_heights`]; 0 = none, the paper's
@@ -88,7 +94,8 @@ impl Default for InsarConfig {
             unwrap: true,
             check_coregistration: true,
             geocode: GeocodeParams::default(),
-            dem_filter_sigma_px: 1.0,
+            dem_filter: DemFilterKind::Gaussian,
+            dem_filter_sigma_px: DemFilterKind::Gaussian.default_sigma_px(),
             recentre_passes: 2,
             range_oversampling: 2.0,
             azimuth_oversampling: 2.0,
@@ -111,18 +118,29 @@ impl InsarConfig {
         self
     }
 
-    /// Gaussian-equivalent σ, metres, that the output DEM carries beyond the averaging of its
-    /// own pixel: the multilook window (a box `size/step` output pixels wide, variance
-    /// `L²/12` per axis, less the pixel's own `pixel²/12`) and the DEM filter. With the defaults
-    /// `sqrt((40² − 20²)/12 + 20²)` = 22.4 m. The reference tile tops this up to its target.
+    /// The DEM filter ([`Self::dem_filter`] at [`Self::dem_filter_sigma_px`]).
+    pub fn filter(&self) -> DemFilter {
+        DemFilter {
+            kind: self.dem_filter,
+            sigma_px: self.dem_filter_sigma_px,
+        }
+    }
+
+    /// Gaussian-equivalent σ, metres, that the output DEM's heights carry beyond the averaging
+    /// of its own pixel: the multilook window (a box `size/step` output pixels wide, variance
+    /// `L²/12` per axis, less the pixel's own `pixel²/12`) and the DEM filter's second moment
+    /// ([`DemFilter::signal_sigma_m`]: the mean's σ, none for the quadratic fit). With the
+    /// defaults `sqrt((40² − 20²)/12 + 20²)` = 22.4 m (10 m with the quadratic fit). The
+    /// reference tile tops this up to its target. The height *noise* is correlated further
+    /// ([`error_blur_m`]).
     pub fn inherent_smoothing_m(&self) -> f64 {
         let box_px = self.window.size as f64 / self.window.step.max(1) as f64;
         let window_var = (box_px * box_px - 1.0).max(0.0) * self.pixel_m.powi(2) / 12.0;
-        let filter = self.dem_filter_sigma_px * self.pixel_m;
+        let filter = self.filter().signal_sigma_m(self.pixel_m);
         (window_var + filter * filter).sqrt()
     }
 
-    /// Check the parameters (window, pixel, coherence, passes, prior cell); the chain calls it
+    /// Check the parameters (window, pixel, coherence, filter, passes, prior cell); the chain calls it
     /// first, the commands before any simulation.
     pub fn validate(&self) -> InsarResult<()> {
         let w = self.window;
@@ -141,6 +159,16 @@ impl InsarConfig {
             return Err(InsarError::Input(format!(
                 "passes must be 1–{MAX_PASSES}, got {}",
                 self.passes
+            )));
+        }
+        let sigma = self.dem_filter_sigma_px;
+        let (lo, hi) = (
+            super::demfilter::MIN_SIGMA_PX,
+            super::demfilter::MAX_SIGMA_PX,
+        );
+        if !(sigma == 0.0 || (lo..=hi).contains(&sigma)) {
+            return Err(InsarError::Input(format!(
+                "the DEM filter's σ must be 0 (none) or {lo}–{hi} px, got {sigma}"
             )));
         }
         if !(self.prior_dem_cell_m.is_finite() && self.prior_dem_cell_m >= 0.0) {
@@ -267,6 +295,11 @@ pub struct InsarProduct {
     /// kernel lay on valid cells ([`dem_filter_noise_factor`]; 1 without the filter). Cells by
     /// a hole or the edge have their own ([`dem_filter_noise_factors`]).
     pub crlb_filter_factor: f64,
+    /// Correlation length of the height noise after the DEM filter: σ, metres, of the Gaussian
+    /// blur of white noise with the same neighbour correlation ([`error_blur_m`]). Reported
+    /// for the quadratic DEM filter, whose signal blur is not its noise's; the rehearsal draws
+    /// the map's error with it.
+    pub error_blur_m: f64,
     /// Coregistration figures.
     pub coreg: CoregReport,
     /// Unwrapping figures.
@@ -771,9 +804,7 @@ pub fn process_stack(
             })
             .collect()
     };
-    if cfg.dem_filter_sigma_px > 0.0 {
-        heights = gaussian_filter(&heights, grid.width, grid.height, cfg.dem_filter_sigma_px);
-    }
+    heights = filter_dem(&heights, grid.width, grid.height, cfg.filter());
     let dem = grid.raster(masked(&heights))?;
     let coherence = grid.raster(masked(&geo.channels[1]))?;
     // The bound follows the heights through the DEM filter: it averages noise that is
@@ -785,17 +816,16 @@ pub fn process_stack(
     // Per cell: a kernel cut by a hole or the edge averages differently. The filter keeps
     // NaN as NaN, so the filtered heights tell which cells it averaged.
     let valid: Vec<bool> = heights.iter().map(|v| v.is_finite()).collect();
-    let (crlb_filter_factor, factors) = dem_filter_noise_factors(
-        &valid,
-        grid.width,
-        grid.height,
-        cfg.dem_filter_sigma_px,
-        w.size,
-        w.step,
-        lags,
-        [cfg.azimuth_oversampling, cfg.range_oversampling],
-        cfg.hamming_alpha,
-    );
+    let noise = LookNoise {
+        size: w.size,
+        step: w.step,
+        lag_per_px: lags,
+        oversampling: [cfg.azimuth_oversampling, cfg.range_oversampling],
+        alpha: cfg.hamming_alpha,
+    };
+    let (crlb_filter_factor, factors) =
+        dem_filter_noise_factors(&valid, grid.width, grid.height, cfg.filter(), noise);
+    let error_blur_m = error_blur_m(cfg.filter(), noise, grid.pixel_m);
     let sig_filtered: Vec<f64> = geo.channels[2]
         .iter()
         .zip(&factors)
@@ -828,6 +858,7 @@ pub fn process_stack(
         radar: radar_layers,
         effective_looks: looks_eff,
         crlb_filter_factor,
+        error_blur_m,
         coreg: CoregReport {
             offset_near_gates: offset.first().copied().unwrap_or(0.0),
             offset_far_gates: offset.last().copied().unwrap_or(0.0),
@@ -912,216 +943,6 @@ pub fn recentre_heights(
         cur = next;
     }
     cur
-}
-
-/// Factor by which a Gaussian filter of `sigma_px` output pixels (as [`gaussian_filter`])
-/// shrinks the standard deviation of multilook height noise: `Σ_ij w_i w_j ρ(i − j)` per axis,
-/// multiplied over both, with `w` the filter's normalised weights and `ρ` the noise correlation
-/// of neighbouring cells ([`multilook_noise_correlation`] of a `size`-sample window moved
-/// `step` samples per radar pixel, at `lag_per_px[axis]` radar pixels per output pixel;
-/// azimuth first, then range, each with its `oversampling`), each axis's term being
-/// `sqrt(Σ_ij w_i w_j ρ(i − j)) / Σ w`. White noise would keep `sqrt(Σ w²) / Σ w` = 0.53 per
-/// axis at 1 px, 0.28 over both; the overlap of the looks keeps more. For the default chain
-/// (8-sample windows, step 4, 2× oversampling, radar pixels of the 20 m grid) it is 0.55,
-/// and the correlation it predicts after the filter, 0.84 at one cell and 0.49 at two, is
-/// what the suite's InSAR height errors show (0.80–0.82 and 0.46–0.53; [`crate::evaluation::rehearsal::ErrorModel`]).
-pub fn dem_filter_noise_factor(
-    sigma_px: f64,
-    size: usize,
-    step: usize,
-    lag_per_px: [f64; 2],
-    oversampling: [f64; 2],
-    alpha: f64,
-) -> f64 {
-    let Some(t) = FilterNoise::new(sigma_px, size, step, lag_per_px, oversampling, alpha) else {
-        return 1.0;
-    };
-    let total: f64 = t.kernel.iter().sum();
-    let mut factor = 1.0;
-    for rho in &t.rho {
-        let mut var = 0.0;
-        for (i, a) in t.kernel.iter().enumerate() {
-            for (j, b) in t.kernel.iter().enumerate() {
-                var += a * b * rho[i.abs_diff(j)];
-            }
-        }
-        factor *= var.max(0.0).sqrt() / total;
-    }
-    if factor.is_finite() { factor } else { 1.0 }
-}
-
-/// [`dem_filter_noise_factor`] per cell of a `w × h` grid (rows azimuth, columns range) whose
-/// `valid` cells the filter averaged: [`gaussian_filter`] renormalises a kernel cut by holes
-/// or the grid's edge, and such a cell averages differently, mostly less (default chain: 0.63
-/// at a straight edge, 0.72 at a corner, 1 for a cell alone). Cells whose kernel lies on valid
-/// cells only take the full factor; the others sum their kernel's valid part. Returns that full
-/// factor and the per-cell ones (1 everywhere without a filter).
-#[allow(clippy::too_many_arguments)]
-pub fn dem_filter_noise_factors(
-    valid: &[bool],
-    w: usize,
-    h: usize,
-    sigma_px: f64,
-    size: usize,
-    step: usize,
-    lag_per_px: [f64; 2],
-    oversampling: [f64; 2],
-    alpha: f64,
-) -> (f64, Vec<f64>) {
-    let n = (w * h).min(valid.len());
-    let Some(t) = FilterNoise::new(sigma_px, size, step, lag_per_px, oversampling, alpha) else {
-        return (1.0, vec![1.0; n]);
-    };
-    let full = dem_filter_noise_factor(sigma_px, size, step, lag_per_px, oversampling, alpha);
-    let r = t.kernel.len() / 2;
-    let side = 2 * r + 1;
-    // Valid cells within each cell's kernel footprint (summed-area table).
-    let mut table = vec![0u32; (w + 1) * (h + 1)];
-    for y in 0..h {
-        let mut run = 0u32;
-        for x in 0..w {
-            run += u32::from(y * w + x < n && valid[y * w + x]);
-            table[(y + 1) * (w + 1) + x + 1] = table[y * (w + 1) + x + 1] + run;
-        }
-    }
-    let count = |y: usize, x: usize| -> usize {
-        let (y0, y1) = (y.saturating_sub(r), (y + r + 1).min(h));
-        let (x0, x1) = (x.saturating_sub(r), (x + r + 1).min(w));
-        let at = |yy: usize, xx: usize| i64::from(table[yy * (w + 1) + xx]);
-        (at(y1, x1) - at(y0, x1) - at(y1, x0) + at(y0, x0)) as usize
-    };
-    let per_cell = (0..n)
-        .into_par_iter()
-        .map(|i| {
-            let (y, x) = (i / w, i % w);
-            if count(y, x) == side * side {
-                return full;
-            }
-            // The kernel's valid cells, with their weights.
-            let mut cells: Vec<(usize, usize, f64)> = Vec::with_capacity(side * side);
-            for dy in 0..side {
-                let yy = y as i64 + dy as i64 - r as i64;
-                if yy < 0 || yy >= h as i64 {
-                    continue;
-                }
-                for dx in 0..side {
-                    let xx = x as i64 + dx as i64 - r as i64;
-                    if xx < 0 || xx >= w as i64 || !valid[yy as usize * w + xx as usize] {
-                        continue;
-                    }
-                    cells.push((dy, dx, t.kernel[dy] * t.kernel[dx]));
-                }
-            }
-            let total: f64 = cells.iter().map(|c| c.2).sum();
-            let mut var = 0.0;
-            for a in &cells {
-                for b in &cells {
-                    var += a.2 * b.2 * t.rho[0][a.0.abs_diff(b.0)] * t.rho[1][a.1.abs_diff(b.1)];
-                }
-            }
-            let f = var.max(0.0).sqrt() / total;
-            if f.is_finite() { f } else { 1.0 }
-        })
-        .collect();
-    (full, per_cell)
-}
-
-/// The filter's 1-D kernel and the noise correlation per axis at its lags.
-struct FilterNoise {
-    kernel: Vec<f64>,
-    /// Azimuth, range: correlation at lag 0..=2r output pixels.
-    rho: [Vec<f64>; 2],
-}
-
-impl FilterNoise {
-    fn new(
-        sigma_px: f64,
-        size: usize,
-        step: usize,
-        lag_per_px: [f64; 2],
-        oversampling: [f64; 2],
-        alpha: f64,
-    ) -> Option<Self> {
-        let usable = sigma_px > 0.0
-            && sigma_px < 1e3
-            && lag_per_px.iter().all(|l| l.is_finite() && *l >= 0.0);
-        if !usable {
-            return None;
-        }
-        let r = (3.0 * sigma_px).ceil() as usize;
-        let kernel: Vec<f64> = (0..=2 * r)
-            .map(|i| {
-                let d = i as f64 - r as f64;
-                (-d * d / (2.0 * sigma_px * sigma_px)).exp()
-            })
-            .collect();
-        let rho = [0, 1].map(|axis| {
-            (0..=2 * r)
-                .map(|d| {
-                    multilook_noise_correlation(
-                        size,
-                        step,
-                        d as f64 * lag_per_px[axis],
-                        oversampling[axis],
-                        alpha,
-                    )
-                })
-                .collect()
-        });
-        Some(Self { kernel, rho })
-    }
-}
-
-/// Gaussian filter of standard deviation `sigma_px` (kernel cut at 3σ) over the finite values
-/// of a `w × h` grid, normalised by the weights that fell on finite values; NaN stays NaN.
-pub fn gaussian_filter(z: &[f64], w: usize, h: usize, sigma_px: f64) -> Vec<f64> {
-    let r = (3.0 * sigma_px).ceil() as usize;
-    let k: Vec<f64> = (0..=2 * r)
-        .map(|i| {
-            let d = i as f64 - r as f64;
-            (-d * d / (2.0 * sigma_px * sigma_px)).exp()
-        })
-        .collect();
-    // Separable: rows, then columns, each carrying (Σ k·z, Σ k) so holes renormalise.
-    let pass = |src: &[(f64, f64)], horizontal: bool| -> Vec<(f64, f64)> {
-        let mut out = vec![(0.0, 0.0); w * h];
-        for y in 0..h {
-            for x in 0..w {
-                let (mut a, mut b) = (0.0, 0.0);
-                for (i, &kk) in k.iter().enumerate() {
-                    let d = i as i64 - r as i64;
-                    let (xx, yy) = if horizontal {
-                        (x as i64 + d, y as i64)
-                    } else {
-                        (x as i64, y as i64 + d)
-                    };
-                    if xx < 0 || yy < 0 || xx >= w as i64 || yy >= h as i64 {
-                        continue;
-                    }
-                    let (v, wt) = src[yy as usize * w + xx as usize];
-                    a += kk * v;
-                    b += kk * wt;
-                }
-                out[y * w + x] = (a, b);
-            }
-        }
-        out
-    };
-    let init: Vec<(f64, f64)> = z
-        .iter()
-        .map(|&v| if v.is_finite() { (v, 1.0) } else { (0.0, 0.0) })
-        .collect();
-    let out = pass(&pass(&init, true), false);
-    out.iter()
-        .zip(z)
-        .map(|(&(a, b), &v)| {
-            if v.is_finite() && b > 0.0 {
-                a / b
-            } else {
-                f64::NAN
-            }
-        })
-        .collect()
 }
 
 fn span(v: &[f64]) -> f64 {

@@ -882,32 +882,54 @@ fn the_frames_share_of_one_look_cells_is_the_worst_windows() {
     assert!(worst_window_share(&flag, &[false; 1600], w, 20.0).is_nan());
 }
 
+fn look_noise(size: usize, os: f64, alpha: f64) -> super::demfilter::LookNoise {
+    super::demfilter::LookNoise {
+        size,
+        step: 4,
+        lag_per_px: [1.0, 1.0],
+        oversampling: [os, os],
+        alpha,
+    }
+}
+
 #[test]
 fn the_dem_filter_shrinks_the_bound_by_what_the_looks_do_not_share() {
-    use super::pipeline::{dem_filter_noise_factor, dem_filter_noise_factors};
+    use super::demfilter::{
+        DemFilter, DemFilterKind, dem_filter_noise_factor, dem_filter_noise_factors,
+    };
+    let gauss = |sigma_px| DemFilter {
+        kind: DemFilterKind::Gaussian,
+        sigma_px,
+    };
+    let quad = |sigma_px| DemFilter {
+        kind: DemFilterKind::Quadratic,
+        sigma_px,
+    };
+    let chain = look_noise(8, 2.0, 0.54);
     // White noise (Nyquist-sampled rectangular spectrum, windows that do not overlap): the
-    // filter keeps sqrt(Σw²)/Σw per axis, 0.282 over both at 1 px.
+    // mean keeps sqrt(Σw²)/Σw per axis, 0.282 over both at 1 px.
     let k: Vec<f64> = (-3..=3)
         .map(|d: i32| (-f64::from(d * d) / 2.0).exp())
         .collect();
     let white = k.iter().map(|v| v * v).sum::<f64>() / k.iter().sum::<f64>().powi(2);
-    let f = dem_filter_noise_factor(1.0, 4, 4, [1.0, 1.0], [1.0, 1.0], 1.0);
+    let f = dem_filter_noise_factor(gauss(1.0), look_noise(4, 1.0, 1.0));
     assert!(
         (f - white).abs() < 2e-3 && (white - 0.282).abs() < 1e-3,
         "{f} {white}"
     );
-    // The default chain's overlapping looks keep more: 0.553.
-    let d = dem_filter_noise_factor(1.0, 8, 4, [1.0, 1.0], [2.0, 2.0], 0.54);
+    // The default chain's overlapping looks keep more: 0.553 for the 1 px mean (session 24),
+    // about 0.50 for the 2 px quadratic fit, which needs the wider weights to average as
+    // much because its kernel has negative lobes.
+    let d = dem_filter_noise_factor(gauss(1.0), chain);
     assert!((d - 0.553).abs() < 2e-3, "{d}");
+    let q = dem_filter_noise_factor(quad(2.0), chain);
+    assert!((q - 0.50).abs() < 0.01, "{q}");
     // No filter, or nonsense lags: the bound as it was.
-    assert_eq!(
-        dem_filter_noise_factor(0.0, 8, 4, [1.0, 1.0], [2.0, 2.0], 0.54),
-        1.0
-    );
-    assert_eq!(
-        dem_filter_noise_factor(1.0, 8, 4, [f64::NAN, 1.0], [2.0, 2.0], 0.54),
-        1.0
-    );
+    assert_eq!(dem_filter_noise_factor(gauss(0.0), chain), 1.0);
+    assert_eq!(dem_filter_noise_factor(quad(0.0), chain), 1.0);
+    let mut bad = chain;
+    bad.lag_per_px[0] = f64::NAN;
+    assert_eq!(dem_filter_noise_factor(quad(2.0), bad), 1.0);
     // Per cell: inside, the full factor; at the edge the kernel is cut and keeps more, at a
     // corner more still; a cell alone within its kernel keeps its whole bound.
     let (w, h) = (20, 20);
@@ -917,8 +939,7 @@ fn the_dem_filter_shrinks_the_bound_by_what_the_looks_do_not_share() {
             valid[r * w + c] = (r, c) == (15, 15);
         }
     }
-    let (full, fs) =
-        dem_filter_noise_factors(&valid, w, h, 1.0, 8, 4, [1.0, 1.0], [2.0, 2.0], 0.54);
+    let (full, fs) = dem_filter_noise_factors(&valid, w, h, gauss(1.0), chain);
     assert!((full - d).abs() < 1e-12);
     assert!(
         (fs[6 * w + 6] - d).abs() < 1e-12,
@@ -931,7 +952,253 @@ fn the_dem_filter_shrinks_the_bound_by_what_the_looks_do_not_share() {
         "{edge} {corner}"
     );
     assert!((fs[15 * w + 15] - 1.0).abs() < 1e-12, "{}", fs[15 * w + 15]);
-    let (_, alone) =
-        dem_filter_noise_factors(&[true], 1, 1, 1.0, 8, 4, [1.0, 1.0], [2.0, 2.0], 0.54);
+    let (_, alone) = dem_filter_noise_factors(&[true], 1, 1, gauss(1.0), chain);
     assert!((alone[0] - 1.0).abs() < 1e-12, "{alone:?}");
+    // The quadratic fit: the same shape, never above 1 (a fit that would keep more than 55 %
+    // of the white noise falls back to a plane or the mean).
+    let (w, h) = (30, 30);
+    let mut valid = vec![true; w * h];
+    valid[20 * w + 20] = false;
+    let (full, fs) = dem_filter_noise_factors(&valid, w, h, quad(2.0), chain);
+    assert!((full - q).abs() < 1e-12);
+    assert!((fs[8 * w + 8] - q).abs() < 1e-12, "{}", fs[8 * w + 8]);
+    assert!(fs[8 * w] > q + 0.05, "edge {}", fs[8 * w]);
+    assert!(
+        (q - 0.05..1.0).contains(&fs[20 * w + 21]),
+        "by a hole {}",
+        fs[20 * w + 21]
+    );
+    assert!(fs.iter().all(|&f| f > 0.0 && f <= 1.0 + 1e-9), "{fs:?}");
+    let (_, alone) = dem_filter_noise_factors(&[true], 1, 1, quad(2.0), chain);
+    assert!((alone[0] - 1.0).abs() < 1e-12, "{alone:?}");
+}
+
+#[test]
+fn the_means_bound_is_summed_as_it_always_was() {
+    // The default products must not move by a bit: the 1 px mean's per-cell factors, summed
+    // here in the order of session 24's code (separable full factor; unnormalised weights with
+    // the total divided out last), equal the module's exactly.
+    use super::demfilter::{DemFilter, DemFilterKind, dem_filter_noise_factors};
+    use super::looks::multilook_noise_correlation;
+    let (w, h, r) = (23usize, 17usize, 3usize);
+    let valid: Vec<bool> = (0..w * h).map(|i| (i * 7919) % 11 != 3).collect();
+    let noise = look_noise(8, 2.0, 0.54);
+    let k: Vec<f64> = (0..=2 * r)
+        .map(|i| {
+            let d = i as f64 - r as f64;
+            (-d * d / 2.0).exp()
+        })
+        .collect();
+    let rho: Vec<f64> = (0..=2 * r)
+        .map(|d| multilook_noise_correlation(8, 4, d as f64, 2.0, 0.54))
+        .collect();
+    let total: f64 = k.iter().sum();
+    let mut full = 1.0;
+    for _ in 0..2 {
+        let mut var = 0.0;
+        for (i, a) in k.iter().enumerate() {
+            for (j, b) in k.iter().enumerate() {
+                var += a * b * rho[i.abs_diff(j)];
+            }
+        }
+        full *= f64::max(var, 0.0).sqrt() / total;
+    }
+    let (f, fs) = dem_filter_noise_factors(
+        &valid,
+        w,
+        h,
+        DemFilter {
+            kind: DemFilterKind::Gaussian,
+            sigma_px: 1.0,
+        },
+        noise,
+    );
+    assert_eq!(f.to_bits(), full.to_bits());
+    for (i, got) in fs.iter().enumerate() {
+        if !valid[i] {
+            continue;
+        }
+        let (y, x) = ((i / w) as i64, (i % w) as i64);
+        let mut cells = Vec::new();
+        for dy in 0..=2 * r {
+            for dx in 0..=2 * r {
+                let (yy, xx) = (y + dy as i64 - r as i64, x + dx as i64 - r as i64);
+                if (0..h as i64).contains(&yy)
+                    && (0..w as i64).contains(&xx)
+                    && valid[yy as usize * w + xx as usize]
+                {
+                    cells.push((dy, dx, k[dy] * k[dx]));
+                }
+            }
+        }
+        let whole = cells.len() == (2 * r + 1) * (2 * r + 1);
+        let tot: f64 = cells.iter().map(|c| c.2).sum();
+        let mut var = 0.0;
+        for a in &cells {
+            for b in &cells {
+                var += a.2 * b.2 * rho[a.0.abs_diff(b.0)] * rho[a.1.abs_diff(b.1)];
+            }
+        }
+        let want = if whole {
+            full
+        } else {
+            f64::max(var, 0.0).sqrt() / tot
+        };
+        assert_eq!(got.to_bits(), want.to_bits(), "cell {i}: {got} vs {want}");
+    }
+}
+
+#[test]
+fn a_quadratic_fit_too_narrow_to_fit_reports_the_blur_of_its_fallback() {
+    use super::demfilter::{DemFilter, DemFilterKind};
+    let q = |sigma_px| DemFilter {
+        kind: DemFilterKind::Quadratic,
+        sigma_px,
+    };
+    // At 2 px the fit adds no second moment; at 0.5 px it falls back to a plane, which on a
+    // whole footprint is the mean, and says so.
+    assert_eq!(q(2.0).signal_sigma_m(20.0), 0.0);
+    let narrow = q(0.5).signal_sigma_m(20.0);
+    assert!(narrow > 5.0 && narrow < 20.0, "{narrow}");
+    // σ outside the accepted range: no filter, no blur.
+    assert_eq!(q(0.01).signal_sigma_m(20.0), 0.0);
+}
+
+#[test]
+fn the_quadratic_filter_keeps_curvature_the_mean_flattens() {
+    use super::demfilter::{DemFilter, DemFilterKind, filter_dem};
+    // A bowl z = 0.01·r² m (cells of 1 px; ∇²z = 0.04 per px²) with a tilt, a hole and edges.
+    let (w, h) = (40, 30);
+    let surface = |x: f64, y: f64| {
+        3.0 + 0.2 * x - 0.1 * y + 0.01 * ((x - 20.0).powi(2) + (y - 15.0).powi(2)) + 0.002 * x * y
+    };
+    let mut z: Vec<f64> = (0..w * h)
+        .map(|i| surface((i % w) as f64, (i / w) as f64))
+        .collect();
+    for y in 10..13 {
+        for x in 25..29 {
+            z[y * w + x] = f64::NAN;
+        }
+    }
+    let quad = filter_dem(
+        &z,
+        w,
+        h,
+        DemFilter {
+            kind: DemFilterKind::Quadratic,
+            sigma_px: 2.0,
+        },
+    );
+    let mean = filter_dem(
+        &z,
+        w,
+        h,
+        DemFilter {
+            kind: DemFilterKind::Gaussian,
+            sigma_px: 2.0,
+        },
+    );
+    let mut worst_quad = 0.0f64;
+    for i in 0..w * h {
+        assert_eq!(
+            z[i].is_finite(),
+            quad[i].is_finite(),
+            "NaN stays NaN, at {i}"
+        );
+        if z[i].is_finite() {
+            worst_quad = worst_quad.max((quad[i] - z[i]).abs());
+        }
+    }
+    // Everywhere a quadratic fits (inside, by the hole, at the edges) it is reproduced; the
+    // corner cells that fall back to a plane are off by the curvature over their lopsided
+    // footprint.
+    assert!(worst_quad < 0.3, "{worst_quad}");
+    let mut worst_inner = 0.0f64;
+    for y in 3..h - 3 {
+        for x in 3..w - 3 {
+            if z[y * w + x].is_finite() {
+                worst_inner = worst_inner.max((quad[y * w + x] - z[y * w + x]).abs());
+            }
+        }
+    }
+    assert!(worst_inner < 1e-6, "{worst_inner}");
+    let inside = 15 * w + 10;
+    assert!((quad[inside] - z[inside]).abs() < 1e-9);
+    assert!(
+        (quad[12 * w + 24] - z[12 * w + 24]).abs() < 1e-6,
+        "by the hole"
+    );
+    // The mean raises the bowl by σ²/2 · ∇²z = 2 · 0.04 = 0.08 m.
+    let bias = mean[inside] - z[inside];
+    assert!((bias - 0.08).abs() < 0.01, "{bias}");
+}
+
+#[test]
+fn the_filters_bound_matches_filtered_white_noise() {
+    use super::demfilter::{DemFilter, DemFilterKind, dem_filter_noise_factor, filter_dem};
+    use rand::{RngExt, SeedableRng};
+    let (w, h) = (160, 160);
+    let mut rng = rand_pcg::Pcg64::seed_from_u64(25);
+    // Unit white noise (Box–Muller).
+    let z: Vec<f64> = (0..w * h)
+        .map(|_| {
+            let (u, v): (f64, f64) = (rng.random::<f64>().max(1e-12), rng.random());
+            (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
+        })
+        .collect();
+    for kind in [DemFilterKind::Quadratic, DemFilterKind::Gaussian] {
+        let filter = DemFilter {
+            kind,
+            sigma_px: 2.0,
+        };
+        let f = filter_dem(&z, w, h, filter);
+        let inner: Vec<f64> = (0..w * h)
+            .filter(|i| (10..h - 10).contains(&(i / w)) && (10..w - 10).contains(&(i % w)))
+            .map(|i| f[i])
+            .collect();
+        let sd = (inner.iter().map(|v| v * v).sum::<f64>() / inner.len() as f64).sqrt();
+        let predicted = dem_filter_noise_factor(filter, look_noise(4, 1.0, 1.0));
+        assert!(
+            (sd / predicted - 1.0).abs() < 0.06,
+            "{kind:?}: {sd} vs {predicted}"
+        );
+    }
+}
+
+#[test]
+fn the_filtered_noise_correlation_sets_the_rehearsals_blur() {
+    use super::demfilter::{DemFilter, DemFilterKind, error_blur_m};
+    let chain = look_noise(8, 2.0, 0.54);
+    // The default 1 px mean: neighbour correlation 0.84 at 20 m, a blur of 23.7 m (the
+    // DEM's signal blur, 22.4 m, which the rehearsal keeps for it, gives 0.82).
+    let g = error_blur_m(
+        DemFilter {
+            kind: DemFilterKind::Gaussian,
+            sigma_px: 1.0,
+        },
+        chain,
+        20.0,
+    );
+    assert!((g - 23.7).abs() < 0.3, "{g}");
+    // The 2 px quadratic fit keeps more of the looks' correlation: about 0.90, 30 m (the
+    // suite's error maps, noise and relief error together, show 0.82–0.84).
+    let b = error_blur_m(
+        DemFilter {
+            kind: DemFilterKind::Quadratic,
+            sigma_px: 2.0,
+        },
+        chain,
+        20.0,
+    );
+    assert!((25.0..35.0).contains(&b), "{b}");
+    // No filter over windows that do not overlap: white, no blur.
+    let none = error_blur_m(
+        DemFilter {
+            kind: DemFilterKind::Quadratic,
+            sigma_px: 0.0,
+        },
+        look_noise(4, 1.0, 1.0),
+        20.0,
+    );
+    assert_eq!(none, 0.0);
 }
