@@ -1166,6 +1166,67 @@ fn the_filters_bound_matches_filtered_white_noise() {
 }
 
 #[test]
+fn the_per_cell_bound_matches_filtered_white_noise_at_edges_and_holes() {
+    // Where the footprint is cut (the map's edge, a hole) each cell has its own weights and
+    // its own factor; filtered white noise must have that σ there too.
+    use super::demfilter::{DemFilter, DemFilterKind, dem_filter_noise_factors, filter_dem};
+    use rand::{RngExt, SeedableRng};
+    let (w, h) = (30usize, 30usize);
+    let hole = |i: usize| (14..17).contains(&(i / w)) && (14..17).contains(&(i % w));
+    let valid: Vec<bool> = (0..w * h).map(|i| !hole(i)).collect();
+    let edge: Vec<usize> = (6..24).collect();
+    let by_hole = [13 * w + 15, 17 * w + 15, 15 * w + 13, 15 * w + 17];
+    let mut rng = rand_pcg::Pcg64::seed_from_u64(26);
+    for kind in [DemFilterKind::Quadratic, DemFilterKind::Gaussian] {
+        let filter = DemFilter {
+            kind,
+            sigma_px: 2.0,
+        };
+        let (_, fs) = dem_filter_noise_factors(&valid, w, h, filter, look_noise(4, 1.0, 1.0));
+        let (mut edge_ss, mut hole_ss) = (0.0, 0.0);
+        let runs = 300;
+        for _ in 0..runs {
+            let z: Vec<f64> = (0..w * h)
+                .map(|i| {
+                    if hole(i) {
+                        return f64::NAN;
+                    }
+                    let (u, v): (f64, f64) = (rng.random::<f64>().max(1e-12), rng.random());
+                    (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
+                })
+                .collect();
+            let f = filter_dem(&z, w, h, filter);
+            edge_ss += edge.iter().map(|&x| f[x] * f[x]).sum::<f64>();
+            hole_ss += by_hole.iter().map(|&i| f[i] * f[i]).sum::<f64>();
+        }
+        let edge_sd = (edge_ss / (runs * edge.len()) as f64).sqrt();
+        let hole_sd = (hole_ss / (runs * by_hole.len()) as f64).sqrt();
+        // The cells of each set share one factor (the edge row away from corners; the hole's
+        // four sides by symmetry).
+        assert!(edge.iter().all(|&x| (fs[x] - fs[edge[0]]).abs() < 1e-12));
+        assert!(
+            by_hole
+                .iter()
+                .all(|&i| (fs[i] - fs[by_hole[0]]).abs() < 1e-9)
+        );
+        assert!(
+            fs[edge[0]] > fs[15 * w + 5] + 0.01,
+            "the edge keeps more noise"
+        );
+        assert!(
+            (edge_sd / fs[edge[0]] - 1.0).abs() < 0.05,
+            "{kind:?} edge: {edge_sd} vs {}",
+            fs[edge[0]]
+        );
+        assert!(
+            (hole_sd / fs[by_hole[0]] - 1.0).abs() < 0.07,
+            "{kind:?} by the hole: {hole_sd} vs {}",
+            fs[by_hole[0]]
+        );
+    }
+}
+
+#[test]
 fn the_filtered_noise_correlation_sets_the_rehearsals_blur() {
     use super::demfilter::{DemFilter, DemFilterKind, error_blur_m};
     let chain = look_noise(8, 2.0, 0.54);
