@@ -436,3 +436,59 @@ mod tests {
         );
     }
 }
+
+/// Flagged cells of a `w × h` grid (row-major) counted over any rectangle in O(1): a
+/// summed-area table. Shared by the DEM filter's footprints and the one-look windows.
+#[derive(Debug, Clone)]
+pub struct CellCounts {
+    /// `table[r·(w+1) + c]` = flagged cells in rows `< r`, columns `< c`.
+    table: Vec<u32>,
+    w: usize,
+    h: usize,
+}
+
+impl CellCounts {
+    /// Count the cells `i` (row-major index) for which `flag(i)` holds.
+    pub fn new(w: usize, h: usize, flag: impl Fn(usize) -> bool) -> Self {
+        let mut table = vec![0u32; (w + 1) * (h + 1)];
+        for r in 0..h {
+            let mut run = 0u32;
+            for c in 0..w {
+                run += u32::from(flag(r * w + c));
+                table[(r + 1) * (w + 1) + c + 1] = table[r * (w + 1) + c + 1] + run;
+            }
+        }
+        Self { table, w, h }
+    }
+
+    /// Flagged cells in rows `r0..r1`, columns `c0..c1` (clipped to the grid).
+    pub fn count(&self, r0: usize, c0: usize, r1: usize, c1: usize) -> usize {
+        let (r1, c1) = (r1.min(self.h), c1.min(self.w));
+        if r0 >= r1 || c0 >= c1 {
+            return 0;
+        }
+        let at = |r: usize, c: usize| i64::from(self.table[r * (self.w + 1) + c]);
+        (at(r1, c1) - at(r0, c1) - at(r1, c0) + at(r0, c0)) as usize
+    }
+}
+
+#[cfg(test)]
+mod cell_count_tests {
+    use super::CellCounts;
+
+    #[test]
+    fn rectangles_count_what_a_loop_counts() {
+        let (w, h) = (7, 5);
+        let flag = |i: usize| (i * 13) % 5 < 2;
+        let t = CellCounts::new(w, h, flag);
+        for (r0, c0, r1, c1) in [(0, 0, 5, 7), (1, 2, 4, 6), (3, 3, 3, 6), (2, 5, 9, 9)] {
+            let mut n = 0;
+            for r in r0..r1.min(h) {
+                for c in c0..c1.min(w) {
+                    n += usize::from(flag(r * w + c));
+                }
+            }
+            assert_eq!(t.count(r0, c0, r1, c1), n, "{r0} {c0} {r1} {c1}");
+        }
+    }
+}

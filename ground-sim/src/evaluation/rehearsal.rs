@@ -234,9 +234,9 @@ impl ErrorModel {
     /// Read it from a reference folder: `height-crlb.tif` when present; the blur from
     /// `report.json`'s `error_blur_m` when it states one (the quadratic DEM filter), else from
     /// `tile.json` (`sqrt(smoothing_m² − smoothing_applied_m²)`, the DEM's signal blur, the
-    /// noise's too under the mean; 0 without the file). A DEM
-    /// blurred more than the tile's target smoothing had none applied, and its blur reads as
-    /// the target: an underestimate (not the case for any map the project's chain makes).
+    /// noise's too under the mean; 0 without the file). A DEM blurred more than the tile's
+    /// target smoothing had none applied, and its blur reads as the target: an underestimate
+    /// (not the case for any map the project's chain makes).
     /// Refuses an InSAR folder whose `report.json` predates the bound through the DEM filter.
     pub fn load(dir: &Path) -> anyhow::Result<Self> {
         let crlb = dir.join(crate::insar::products::CRLB_FILE);
@@ -250,10 +250,7 @@ impl ErrorModel {
         let report = dir.join("report.json");
         let mut reported_blur = None;
         if sigma.is_some() && report.exists() {
-            let t = std::fs::read_to_string(&report)
-                .with_context(|| format!("reading {}", report.display()))?;
-            let v: serde_json::Value = serde_json::from_str(&t)
-                .with_context(|| format!("parsing {}", report.display()))?;
+            let v = read_json(&report)?;
             reported_blur = v.get("error_blur_m").and_then(|b| b.as_f64());
             if v.get("crlb_filter_factor").is_none() {
                 bail!(
@@ -268,10 +265,7 @@ impl ErrorModel {
         let blur_m = if let Some(b) = reported_blur.filter(|b| b.is_finite() && *b >= 0.0) {
             b
         } else if meta.exists() {
-            let t = std::fs::read_to_string(&meta)
-                .with_context(|| format!("reading {}", meta.display()))?;
-            let v: serde_json::Value =
-                serde_json::from_str(&t).with_context(|| format!("parsing {}", meta.display()))?;
+            let v = read_json(&meta)?;
             let total = v["smoothing_m"].as_f64().unwrap_or(0.0);
             let applied = v["smoothing_applied_m"].as_f64().unwrap_or(total);
             (total * total - applied * applied).max(0.0).sqrt()
@@ -280,6 +274,12 @@ impl ErrorModel {
         };
         Ok(Self { sigma, blur_m })
     }
+}
+
+/// A JSON file as a value, with the path in any error.
+fn read_json(path: &Path) -> anyhow::Result<serde_json::Value> {
+    let t = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    serde_json::from_str(&t).with_context(|| format!("parsing {}", path.display()))
 }
 
 /// One plausible truth: a draw of the terrain given the map `dem` and its reported `error`

@@ -20,6 +20,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::looks::multilook_noise_correlation;
+use crate::dem::stats::CellCounts;
 
 /// Which kernel smooths the geocoded DEM.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
@@ -131,6 +132,21 @@ impl DemFilter {
         }
     }
 
+    /// The footprint's valid cells with their Gaussian weights `g(dy)·g(dx)`, unnormalised, as
+    /// `(dy, dx, weight)` (offsets `0..=2r` from the footprint's corner).
+    fn footprint_cells(&self, valid: impl Fn(usize, usize) -> bool) -> Vec<(usize, usize, f64)> {
+        let g = self.gauss_1d();
+        let mut cells = Vec::with_capacity(g.len() * g.len());
+        for (dy, gy) in g.iter().enumerate() {
+            for (dx, gx) in g.iter().enumerate() {
+                if valid(dy, dx) {
+                    cells.push((dy, dx, gy * gx));
+                }
+            }
+        }
+        cells
+    }
+
     /// The filter's normalised weights at a cell whose footprint cells are valid where
     /// `valid(dy, dx)` (offsets `0..=2r` from the footprint's corner), as `(dy, dx, weight)`;
     /// weights sum to 1. `None` without a valid cell.
@@ -140,17 +156,8 @@ impl DemFilter {
     /// than 55 % of the white noise's σ (`Σ k² >` [`MAX_FIT_WHITE_GAIN`]: an extrapolation, at
     /// a corner or a hole's edge, that would make the cell noisier, not smoother).
     fn weights(&self, valid: impl Fn(usize, usize) -> bool) -> Option<Vec<(usize, usize, f64)>> {
-        let g = self.gauss_1d();
-        let side = g.len();
         let r = self.radius() as f64;
-        let mut cells = Vec::with_capacity(side * side);
-        for (dy, gy) in g.iter().enumerate() {
-            for (dx, gx) in g.iter().enumerate() {
-                if valid(dy, dx) {
-                    cells.push((dy, dx, gy * gx));
-                }
-            }
-        }
+        let cells = self.footprint_cells(valid);
         let total: f64 = cells.iter().map(|c| c.2).sum();
         if cells.is_empty() || total <= 0.0 {
             return None;
@@ -252,7 +259,7 @@ pub fn filter_dem(z: &[f64], w: usize, h: usize, filter: DemFilter) -> Vec<f64> 
     let side = 2 * r + 1;
     let kernel = filter.full_kernel();
     let finite: Vec<bool> = z.iter().map(|v| v.is_finite()).collect();
-    let counts = FootprintCounts::new(&finite, w, h, r);
+    let feet = Footprints::new(&finite, w, h, r);
     (0..w * h)
         .into_par_iter()
         .map(|i| {
@@ -260,12 +267,8 @@ pub fn filter_dem(z: &[f64], w: usize, h: usize, filter: DemFilter) -> Vec<f64> 
                 return f64::NAN;
             }
             let (y, x) = (i / w, i % w);
-            let at = |dy: usize, dx: usize| -> Option<usize> {
-                let yy = (y + dy).checked_sub(r)?;
-                let xx = (x + dx).checked_sub(r)?;
-                (yy < h && xx < w).then_some(yy * w + xx)
-            };
-            if counts.whole(y, x) {
+            let at = |dy: usize, dx: usize| feet.index(y, x, dy, dx);
+            if feet.whole(y, x) {
                 let mut s = 0.0;
                 for dy in 0..side {
                     let row = (y + dy - r) * w + x - r;
@@ -286,25 +289,19 @@ pub fn filter_dem(z: &[f64], w: usize, h: usize, filter: DemFilter) -> Vec<f64> 
         .collect()
 }
 
-/// Valid cells per footprint, from a summed-area table.
-struct FootprintCounts {
-    table: Vec<u32>,
+/// The filter's footprints on a grid: which cells' footprints are whole (inside the grid, on
+/// valid cells only), and where a footprint offset lands.
+struct Footprints {
+    counts: CellCounts,
     w: usize,
     h: usize,
     r: usize,
 }
 
-impl FootprintCounts {
+impl Footprints {
     fn new(valid: &[bool], w: usize, h: usize, r: usize) -> Self {
-        let mut table = vec![0u32; (w + 1) * (h + 1)];
-        for y in 0..h {
-            let mut run = 0u32;
-            for x in 0..w {
-                run += u32::from(valid.get(y * w + x).copied().unwrap_or(false));
-                table[(y + 1) * (w + 1) + x + 1] = table[y * (w + 1) + x + 1] + run;
-            }
-        }
-        Self { table, w, h, r }
+        let counts = CellCounts::new(w, h, |i| valid.get(i).copied().unwrap_or(false));
+        Self { counts, w, h, r }
     }
 
     /// Whether the footprint of `(y, x)` lies inside the grid on valid cells only.
@@ -313,10 +310,15 @@ impl FootprintCounts {
         if y < r || x < r || y + r >= h || x + r >= w {
             return false;
         }
-        let at = |yy: usize, xx: usize| i64::from(self.table[yy * (w + 1) + xx]);
-        let n = at(y + r + 1, x + r + 1) - at(y - r, x + r + 1) - at(y + r + 1, x - r)
-            + at(y - r, x - r);
-        n as usize == (2 * r + 1) * (2 * r + 1)
+        let side = 2 * r + 1;
+        self.counts.count(y - r, x - r, y + r + 1, x + r + 1) == side * side
+    }
+
+    /// Grid index of the footprint offset `(dy, dx)` (`0..=2r`) of cell `(y, x)`, if inside.
+    fn index(&self, y: usize, x: usize, dy: usize, dx: usize) -> Option<usize> {
+        let yy = (y + dy).checked_sub(self.r)?;
+        let xx = (x + dx).checked_sub(self.r)?;
+        (yy < self.h && xx < self.w).then_some(yy * self.w + xx)
     }
 }
 
@@ -427,13 +429,12 @@ pub fn filtered_neighbour_correlation(filter: DemFilter, noise: LookNoise) -> [f
     let Some(rho) = noise.rho(2 * r + 2) else {
         return [0.0; 2];
     };
-    let k = if filter.active() {
-        filter
-            .weights(|_, _| true)
-            .unwrap_or_else(|| vec![(0, 0, 1.0)])
-    } else {
-        vec![(0, 0, 1.0)]
-    };
+    // No filter: each cell alone.
+    let k = filter
+        .active()
+        .then(|| filter.weights(|_, _| true))
+        .flatten()
+        .unwrap_or_else(|| vec![(0, 0, 1.0)]);
     let v0 = filtered_covariance(&k, &k, &rho);
     // The neighbour's weights are the same kernel one cell further along the axis.
     let shifted = |axis: usize| -> f64 {
@@ -479,8 +480,8 @@ pub fn error_blur_m(filter: DemFilter, noise: LookNoise, pixel_m: f64) -> f64 {
 /// [`dem_filter_noise_factor`] per cell of a `w × h` grid (rows azimuth, columns range) whose
 /// `valid` cells the filter averaged: a cell whose footprint is cut by holes or the grid's
 /// edge has its own weights ([`filter_dem`]) and mostly keeps more noise (a cell alone keeps
-/// all of it). Returns the whole
-/// footprint's factor and the per-cell ones (1 everywhere without a filter).
+/// all of it). Returns the whole footprint's factor and the per-cell ones (1 everywhere
+/// without a filter, and at masked cells).
 pub fn dem_filter_noise_factors(
     valid: &[bool],
     w: usize,
@@ -497,38 +498,24 @@ pub fn dem_filter_noise_factors(
     let Some(rho) = noise.rho(2 * r + 1) else {
         return (1.0, vec![1.0; n]);
     };
-    let counts = FootprintCounts::new(valid, w, h, r);
-    let gauss = filter.gauss_1d();
+    let feet = Footprints::new(valid, w, h, r);
     let per_cell = (0..n)
         .into_par_iter()
         .map(|i| {
             let (y, x) = (i / w, i % w);
-            if counts.whole(y, x) {
+            if feet.whole(y, x) {
                 return full;
             }
             if !valid[i] {
                 // Masked: the chain never reports a bound there.
                 return 1.0;
             }
-            let at = |dy: usize, dx: usize| -> bool {
-                let (Some(yy), Some(xx)) = ((y + dy).checked_sub(r), (x + dx).checked_sub(r))
-                else {
-                    return false;
-                };
-                yy < h && xx < w && yy * w + xx < n && valid[yy * w + xx]
-            };
+            let at =
+                |dy: usize, dx: usize| feet.index(y, x, dy, dx).is_some_and(|j| j < n && valid[j]);
             let f = if filter.kind == DemFilterKind::Gaussian {
                 // Unnormalised weights, the total divided out last: the order the chain has
                 // always used (bit-identical default products).
-                let g = &gauss;
-                let mut cells: Vec<(usize, usize, f64)> = Vec::with_capacity(g.len() * g.len());
-                for (dy, gy) in g.iter().enumerate() {
-                    for (dx, gx) in g.iter().enumerate() {
-                        if at(dy, dx) {
-                            cells.push((dy, dx, gy * gx));
-                        }
-                    }
-                }
+                let cells = filter.footprint_cells(at);
                 let total: f64 = cells.iter().map(|c| c.2).sum();
                 filtered_covariance(&cells, &cells, &rho).max(0.0).sqrt() / total
             } else {

@@ -23,6 +23,7 @@ use super::looks::{LookWindow, equivalent_looks_1d, multilook, phase_crlb_rad};
 use super::unwrap::unwrap_quality_guided;
 use super::{InsarError, InsarResult};
 use crate::dem::Dem;
+use crate::dem::stats::CellCounts;
 use crate::sar::kernel::SincKernel;
 use crate::sar::pipeline::{InsarPair, SimOptions, Timings, simulate_with};
 use crate::sar::{Antenna, Polarisation, SarConfig, SarDem, Slc};
@@ -1249,24 +1250,9 @@ pub fn worst_window_share(flag: &[bool], valid: &[bool], w: usize, side_px: f64)
     }
     // A map narrower than the window (a corridor strip) scans windows as wide as it is.
     let (kx, ky) = (k.min(w), k.min(h));
-    // table[(r)(w+1) + c] = count over rows < r, columns < c.
-    let table = |cell: &dyn Fn(usize) -> bool| -> Vec<u32> {
-        let mut t = vec![0u32; (w + 1) * (h + 1)];
-        for r in 0..h {
-            let mut run = 0u32;
-            for c in 0..w {
-                run += u32::from(cell(r * w + c));
-                t[(r + 1) * (w + 1) + c + 1] = t[r * (w + 1) + c + 1] + run;
-            }
-        }
-        t
-    };
-    let tv = table(&|i| valid[i]);
-    let tf = table(&|i| valid[i] && flag[i]);
-    let sum = |t: &[u32], r: usize, c: usize| {
-        let at = |rr: usize, cc: usize| i64::from(t[rr * (w + 1) + cc]);
-        at(r + ky, c + kx) - at(r, c + kx) - at(r + ky, c) + at(r, c)
-    };
+    let tv = CellCounts::new(w, h, |i| valid[i]);
+    let tf = CellCounts::new(w, h, |i| valid[i] && flag[i]);
+    let sum = |t: &CellCounts, r: usize, c: usize| t.count(r, c, r + ky, c + kx) as i64;
     let mut worst = f64::NAN;
     for r in 0..=h - ky {
         for c in 0..=w - kx {
