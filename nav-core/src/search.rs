@@ -17,18 +17,24 @@
 //!    [`SearchConfig::exclusion_px`] apart are kept;
 //! 2. the best peak climbs uphill in 1 px steps on the coarse grid;
 //! 3. fine: [`FINE_GRID`]² samples around it and around every other peak (±1 px, half steps in
-//!    heading and scale); the other peaks climb on the fine grid, and those that settle on a
-//!    maximum of their own within [`CLIMB_STEPS`], clear of the winner, are runners: the winner
-//!    must beat every runner by [`SearchConfig::min_margin`];
+//!    heading and scale); a winner below [`SearchConfig::min_fine_ncc`] there ends the search
+//!    (nothing matches); the other peaks climb on the fine grid, and those that settle on a
+//!    maximum of their own within [`CLIMB_STEPS`], clear of the winner, and with a valley
+//!    between them and the winner (the fine correlation dips by more than
+//!    [`SearchConfig::min_margin`] somewhere on the path, [`MAX_VALLEY_STEPS`] points at most),
+//!    are runners: the winner must beat every runner by [`SearchConfig::min_margin`];
 //! 4. the best fine candidate starts the Gauss–Newton refinement. The fix stands only if the
 //!    refinement converges to a correlation of at least the gate's `verify_min_ncc` and the best
 //!    peak stands clear of every other ([`SearchConfig::min_margin`]): a second, nearly as good
-//!    alignment elsewhere in the window means the terrain is ambiguous, and no fix is safer.
+//!    alignment beyond a valley means the terrain is ambiguous, and no fix is safer. A ridge
+//!    without a valley (a frame along a crater rim) is one peak: the refinement settles where on
+//!    it the frame lies, with a covariance that says how well, or refuses it as singular.
 //!
 //! Bounds: level 1 reads at most `MAX_OFFSETS² · MAX_HEADINGS · MAX_SCALES · COARSE_GRID²`
 //! raster pixels, the winner's climb `CLIMB_STEPS · 8 · COARSE_GRID²`, the fine level
 //! `MAX_CANDIDATES · 27 · FINE_GRID²` and the runners' climbs
-//! `(MAX_CANDIDATES − 1) · CLIMB_STEPS · 8 · FINE_GRID²`; the sample lists live on
+//! `(MAX_CANDIDATES − 1) · CLIMB_STEPS · 8 · FINE_GRID²`, the valley paths
+//! `(MAX_CANDIDATES − 1) · (MAX_VALLEY_STEPS − 1) · FINE_GRID²`; the sample lists live on
 //! the stack (≈ 3 KiB). Arithmetic is `f32` per sample in a fixed order, sums per candidate, so
 //! host and target agree bit for bit.
 
@@ -80,6 +86,9 @@ pub struct SearchConfig {
     /// The best coarse correlation must reach this for the search to go on (a frame that
     /// correlates with nothing in the window stops here, before the costlier levels).
     pub min_coarse_ncc: f32,
+    /// The winner's correlation on the fine grid must reach this, or nothing in the window
+    /// matches (the refinement must then reach the gate's `verify_min_ncc`, 0.7, anyway).
+    pub min_fine_ncc: f32,
     /// Sample budget of the refinement that confirms a hit (the feature path's refinement uses
     /// [`crate::refine::RefineConfig::max_samples`]); smaller because the search has already
     /// spent part of the frame's instruction budget.
@@ -99,6 +108,7 @@ impl Default for SearchConfig {
             min_margin: 0.1,
             min_valid_fraction: 0.7,
             min_coarse_ncc: 0.3,
+            min_fine_ncc: 0.5,
             refine_max_samples: 800,
             refine_max_iterations: 8,
         }
@@ -121,7 +131,8 @@ pub enum SearchError {
     FlatFrame,
     /// No candidate with enough valid reference samples under it.
     NoCandidate,
-    /// Nothing in the window correlates with the frame ([`SearchConfig::min_coarse_ncc`]).
+    /// Nothing in the window correlates with the frame ([`SearchConfig::min_coarse_ncc`] on the
+    /// coarse grid, [`SearchConfig::min_fine_ncc`] on the fine one).
     NoMatch,
     /// Another peak correlates nearly as well as the best ([`SearchConfig::min_margin`]).
     Ambiguous,
@@ -446,6 +457,12 @@ pub fn search(
     if winner.ncc <= -1.0 {
         return Err(SearchError::NoCandidate);
     }
+    // The coarse lattice's best of up to 1 215 cells can read 0.3–0.4 on a frame that matches
+    // nothing (its 49 samples correlate by chance); the fine lattice judges before the runners
+    // and the refinement spend their share of the budget.
+    if winner.ncc < cfg.min_fine_ncc {
+        return Err(SearchError::NoMatch);
+    }
     // The margin is judged on the fine grid (the coarse one is too noisy for it): each runner's
     // best fine correlation within ±1 px of its peak.
     // A runner counts only as a peak of its own: searched like the winner, then climbed in
@@ -459,7 +476,11 @@ pub fn search(
         }
         let start = fine_peak(fine, raster, *c, (dh, ds, ns), need_fine);
         let (peak, settled) = climb(fine, raster, start, need_fine);
-        if settled && libm::hypotf(peak.x - winner.x, peak.y - winner.y) > cfg.exclusion_px {
+        if settled
+            && libm::hypotf(peak.x - winner.x, peak.y - winner.y) > cfg.exclusion_px
+            && (peak.ncc <= winner.ncc - cfg.min_margin
+                || valley(fine, raster, &winner, &peak, need_fine, cfg.min_margin))
+        {
             runner = runner.max(peak.ncc);
         }
     }
@@ -533,6 +554,37 @@ fn fine_peak(
         }
     }
     best
+}
+
+/// Points at most on the path between the winner and a runner that [`valley`] correlates: 1 px
+/// apart up to 16 px, the coarse window's width (`(MAX_OFFSETS − 1) · COARSE_STEP_PX`); a
+/// runner that climbed beyond it (at most ≈ 24 px away) is sampled every 1.5 px or so.
+pub const MAX_VALLEY_STEPS: usize = 16;
+
+/// Whether the fine correlation dips by more than `depth` below the lower of `a` and `b` somewhere
+/// on the straight path between them (position, heading and scale interpolated, points about
+/// 1 px apart, at most [`MAX_VALLEY_STEPS`]). Two alignments are two peaks only with a valley
+/// between them: where a frame lies along a crater rim, its correlation with the slope raster
+/// is a ridge, whose sampling ripple makes local maxima a few pixels apart that are one peak,
+/// and the refinement, not a tie-break on a 144-sample lattice, settles where on it the frame
+/// lies (its covariance says how well: a straight ridge leaves it singular, and no fix).
+/// Points with too few valid samples do not count as a dip.
+fn valley(fine: &[Sample], r: &SlopeRaster<'_>, a: &Cand, b: &Cand, need: u32, depth: f32) -> bool {
+    let floor = a.ncc.min(b.ncc) - depth;
+    let d = libm::hypotf(b.x - a.x, b.y - a.y);
+    let n = (libm::ceilf(d) as usize).clamp(2, MAX_VALLEY_STEPS);
+    (1..n).any(|i| {
+        let f = i as f32 / n as f32;
+        let c = Cand {
+            x: a.x + f * (b.x - a.x),
+            y: a.y + f * (b.y - a.y),
+            heading: a.heading + f * (b.heading - a.heading),
+            scale: a.scale + f * (b.scale - a.scale),
+            ncc: 0.0,
+        };
+        let k = correlate(fine, r, &c);
+        k.n >= need && k.ncc() < floor
+    })
 }
 
 /// Uphill steps at most when checking whether a runner-up is a peak of its own.
@@ -636,6 +688,12 @@ mod tests {
     /// Stripes: the same along a whole direction, so every shift along it correlates alike.
     fn stripes(x: f64, _y: f64) -> f64 {
         20.0 + 8.0 * libm::sin(0.23 * x)
+    }
+
+    /// Alike bumps on a 7 px square lattice: distinct peaks with valleys between them.
+    fn lattice(x: f64, y: f64) -> f64 {
+        let k = core::f64::consts::TAU / 7.0;
+        20.0 + 6.0 * libm::sin(k * x) + 6.0 * libm::sin(k * y)
     }
 
     fn tile_bytes(f: fn(f64, f64) -> f64) -> Vec<u8> {
@@ -849,16 +907,90 @@ mod tests {
             search(&img, 1, r, &away, &cfg),
             Err(SearchError::NoCandidate)
         );
-        // Stripes along the tile's y axis: every shift along them correlates alike.
+        // A lattice of alike bumps 7 px apart: the window holds several peaks with valleys
+        // between them.
+        let straight = similarity_at(0.0, 0.9, 50.0, 45.0);
+        let lbytes = tile_bytes(lattice);
+        let ltile = Tile::parse(&lbytes).unwrap();
+        let lpx = frame(&straight, lattice);
+        let limg = SlopeImage::new_checked(&lpx, F, F, 18.0).unwrap();
+        let lprior = prior_near(&straight, 0.0, 0.0, 0.0);
+        assert_eq!(
+            search(&limg, 1, raster(&ltile), &lprior, &cfg),
+            Err(SearchError::Ambiguous)
+        );
+    }
+
+    /// A frame whose coarse lattice's pixels are the terrain's and every other pixel noise: the
+    /// coarse level finds the truth, the fine lattice sees noise, and the search stops there.
+    #[test]
+    fn the_fine_lattice_has_the_last_word_on_a_match() {
+        let bytes = tile_bytes(field);
+        let tile = Tile::parse(&bytes).unwrap();
+        let truth = centred(20.0, 0.9, 80.0, 78.0);
+        let clean = frame(&truth, field);
+        let on_coarse = |i: usize| {
+            let at = |k: usize| {
+                libm::roundf(0.05 * F as f32 + (0.9 * F as f32 - 1.0) * k as f32 / 6.0) as usize
+            };
+            let hit = |p: usize| (0..COARSE_GRID).any(|k| at(k) == p);
+            hit(i % F) && hit(i / F)
+        };
+        let mut state = 0x9E37_79B9_7F4A_7C15u64;
+        let px: Vec<SlopePx> = (0..F * F)
+            .map(|i| {
+                state ^= state << 13;
+                state ^= state >> 7;
+                state ^= state << 17;
+                if on_coarse(i) {
+                    clean[i]
+                } else {
+                    slope_from_deg(5.0 + 30.0 * (state >> 40) as f32 / (1u64 << 24) as f32)
+                }
+            })
+            .collect();
+        let img = SlopeImage::new_checked(&px, F, F, 18.0).unwrap();
+        let prior = prior_near(&truth, 2.0, -1.0, 0.5);
+        assert_eq!(
+            search(&img, 1, raster(&tile), &prior, &SearchConfig::default()),
+            Err(SearchError::NoMatch)
+        );
+        // It is the fine lattice's verdict: the coarse level passed.
+        let off = SearchConfig {
+            min_fine_ncc: -1.0,
+            ..SearchConfig::default()
+        };
+        assert_ne!(
+            search(&img, 1, raster(&tile), &prior, &off),
+            Err(SearchError::NoMatch)
+        );
+        // The same frame without the noise is found.
+        let img = SlopeImage::new_checked(&clean, F, F, 18.0).unwrap();
+        assert!(search(&img, 1, raster(&tile), &prior, &SearchConfig::default()).is_ok());
+    }
+
+    /// Stripes along the tile's y axis: every shift along them correlates alike, a ridge without
+    /// a valley. The search hands one point of it on, and the refinement refuses it, since
+    /// nothing fixes the position along the stripes.
+    #[test]
+    fn a_ridge_is_left_to_the_refinement() {
+        let cfg = SearchConfig::default();
         let sbytes = tile_bytes(stripes);
         let stile = Tile::parse(&sbytes).unwrap();
         let straight = similarity_at(0.0, 0.9, 50.0, 45.0);
         let spx = frame(&straight, stripes);
         let simg = SlopeImage::new_checked(&spx, F, F, 18.0).unwrap();
         let sprior = prior_near(&straight, 0.0, 0.0, 0.0);
-        assert_eq!(
-            search(&simg, 1, raster(&stile), &sprior, &cfg),
-            Err(SearchError::Ambiguous)
+        let r = raster(&stile);
+        let hit = search(&simg, 1, r, &sprior, &cfg).expect("a point on the ridge");
+        let refined = crate::refine::refine(
+            &simg,
+            1,
+            r,
+            &hit.affine,
+            &crate::refine::FrameInfo::default(),
+            &crate::refine::RefineConfig::default(),
         );
+        assert_eq!(refined.err(), Some(crate::refine::RefineError::Singular));
     }
 }
