@@ -32,7 +32,7 @@
 //!
 //! Bounds: level 1 reads at most `MAX_OFFSETS² · MAX_HEADINGS · MAX_SCALES · COARSE_GRID²`
 //! raster pixels, the winner's climb `CLIMB_STEPS · 8 · COARSE_GRID²`, the fine level
-//! `MAX_CANDIDATES · 27 · FINE_GRID²` and the runners' climbs
+//! `MAX_CANDIDATES · 81 · FINE_GRID²` (3 headings × 3 scales × 9 positions a peak) and the runners' climbs
 //! `(MAX_CANDIDATES − 1) · CLIMB_STEPS · 8 · FINE_GRID²`, the valley paths
 //! `(MAX_CANDIDATES − 1) · (MAX_VALLEY_STEPS − 1) · FINE_GRID²`; the sample lists live on
 //! the stack (≈ 3 KiB). Arithmetic is `f32` per sample in a fixed order, sums per candidate, so
@@ -86,8 +86,10 @@ pub struct SearchConfig {
     /// The best coarse correlation must reach this for the search to go on (a frame that
     /// correlates with nothing in the window stops here, before the costlier levels).
     pub min_coarse_ncc: f32,
-    /// The winner's correlation on the fine grid must reach this, or nothing in the window
-    /// matches (the refinement must then reach the gate's `verify_min_ncc`, 0.7, anyway).
+    /// The winner's correlation (NCC, −1 to 1) on the fine grid must reach this, or the search
+    /// ends without a hit (the refinement must then reach the gate's `verify_min_ncc`, 0.7,
+    /// anyway). Only the coarse top's fine peak is tested: a window whose top is not the match
+    /// gives no fix, as it did before as "two peaks alike".
     pub min_fine_ncc: f32,
     /// Sample budget of the refinement that confirms a hit (the feature path's refinement uses
     /// [`crate::refine::RefineConfig::max_samples`]); smaller because the search has already
@@ -162,8 +164,9 @@ pub struct SearchHit {
     pub ncc: f32,
     /// The winner's correlation on the coarse grid (after climbing to its 1 px peak).
     pub coarse_ncc: f32,
-    /// The best fine correlation at the other peaks that settle on a maximum of their own (−1
-    /// when there was none): at most `ncc − min_margin`.
+    /// The best fine correlation at the other peaks that settle on a maximum of their own beyond
+    /// a valley (−1 when there was none; a maximum on the winner's own ridge is not counted):
+    /// at most `ncc − min_margin`.
     pub runner_up_ncc: f32,
     /// Coarse candidates evaluated.
     pub coarse_cells: u32,
@@ -556,10 +559,13 @@ fn fine_peak(
     best
 }
 
-/// Points at most on the path between the winner and a runner that [`valley`] correlates: 1 px
-/// apart up to 16 px, the coarse window's width (`(MAX_OFFSETS − 1) · COARSE_STEP_PX`); a
-/// runner that climbed beyond it (at most ≈ 24 px away) is sampled every 1.5 px or so.
+/// Segments at most of the path between the winner and a runner that [`valley`] correlates at
+/// their `MAX_VALLEY_STEPS − 1` inner points: 1 px apart up to 16 px, the coarse window's width
+/// (`(MAX_OFFSETS − 1) · COARSE_STEP_PX`); after their climbs (3 coarse and 1 fine steps for the
+/// winner, 1 fine and 3 climbing steps for a runner) the two can be 24 px apart per axis, ≈ 34 px,
+/// sampled then every ≈ 2.1 px.
 pub const MAX_VALLEY_STEPS: usize = 16;
+const _: () = assert!(MAX_VALLEY_STEPS >= 2);
 
 /// Whether the fine correlation dips by more than `depth` below the lower of `a` and `b` somewhere
 /// on the straight path between them (position, heading and scale interpolated, points about
@@ -568,7 +574,9 @@ pub const MAX_VALLEY_STEPS: usize = 16;
 /// is a ridge, whose sampling ripple makes local maxima a few pixels apart that are one peak,
 /// and the refinement, not a tie-break on a 144-sample lattice, settles where on it the frame
 /// lies (its covariance says how well: a straight ridge leaves it singular, and no fix).
-/// Points with too few valid samples do not count as a dip.
+/// A point with too few valid samples (a hole in the reference, the map's edge) counts as a
+/// dip: what lies between the two peaks is unknown, and calling them one peak would err
+/// towards a fix.
 fn valley(fine: &[Sample], r: &SlopeRaster<'_>, a: &Cand, b: &Cand, need: u32, depth: f32) -> bool {
     let floor = a.ncc.min(b.ncc) - depth;
     let d = libm::hypotf(b.x - a.x, b.y - a.y);
@@ -583,7 +591,7 @@ fn valley(fine: &[Sample], r: &SlopeRaster<'_>, a: &Cand, b: &Cand, need: u32, d
             ncc: 0.0,
         };
         let k = correlate(fine, r, &c);
-        k.n >= need && k.ncc() < floor
+        k.n < need || k.ncc() < floor
     })
 }
 

@@ -297,13 +297,15 @@ fn read_json(path: &Path) -> anyhow::Result<serde_json::Value> {
 /// field without jumps).
 ///
 /// The error is not stationary: a map that mixes 1 m floors and 5–7 m walls (the fresh crater,
-/// the Shackleton rim) has a mean variance 3–4× its median cell's. Drawn at the mean, the
+/// the Shackleton rim) has a mean variance 3.5–6× its median cell's. Drawn at the mean, the
 /// gentle ground got several times the noise it has, and the rehearsal flew it as a worse map
 /// than it is (session 26: the fresh rim lost in space 13 % predicted, 41 % flown; the same
 /// rehearsal from the true terrain predicts 45 %). So the draw is made at a ladder of
-/// variances ([`variance_levels`], the same white noise for all) and every cell takes the
+/// variances (`variance_levels`, the same white noise for all) and every cell takes the
 /// two rungs around its own variance, interpolated in log variance: locally the conditional
-/// simulation of a map whose error had that cell's variance everywhere. A map with one σ
+/// simulation of a map whose error had that cell's variance everywhere, with the whole map's
+/// power per frequency `P` (a wall's high-σ cells are thus drawn somewhat smoother than their
+/// own terrain would warrant). A map with one σ
 /// everywhere takes one rung, as before. A map that reports no error is returned as it is
 /// (holes filled).
 pub fn plausible_truth(dem: &Dem, error: &ErrorModel, seed: u64) -> anyhow::Result<Dem> {
@@ -375,8 +377,9 @@ pub fn plausible_truth(dem: &Dem, error: &ErrorModel, seed: u64) -> anyhow::Resu
 pub const MAX_VARIANCE_LEVELS: usize = 12;
 
 /// The variances [`plausible_truth`] draws at: one when the map's σ varies by less than 1 %
-/// (its mean square), else a geometric ladder from the smallest to the largest cell variance,
-/// rungs at most a factor 2 apart (σ within 19 % of a rung), at most [`MAX_VARIANCE_LEVELS`].
+/// (its mean square), else a geometric ladder from the smallest to the largest cell variance
+/// (m²), rungs at most a factor 2 apart (σ within 19 % of a rung) while the largest is at most
+/// 2¹¹ times the smallest, spread evenly beyond: at most [`MAX_VARIANCE_LEVELS`].
 fn variance_levels(var: &[f64]) -> Vec<f64> {
     let (lo, hi) = var
         .iter()
@@ -394,8 +397,9 @@ fn variance_levels(var: &[f64]) -> Vec<f64> {
 /// [`plausible_truth`]'s spectra on a hole-free `w × h` field `z`: the map's (mirrored at its
 /// edges), its power per frequency ring, and one white-noise field's, so that draws at several
 /// error variances share their randomness. The error is Gaussian-correlated, σ `blur_px`
-/// pixels (0: white). Memory: three complex grids of the mirrored size during a draw, ≈ 200 B
-/// per map cell (0.8 GB for a 2048² map).
+/// pixels (0: white). Memory during a draw: four complex grids of the mirrored size (the map's
+/// and the noise's spectra, the draw and the FFT's scratch) and a few real grids of the map's,
+/// ≈ 290 B per map cell (≈ 1.2 GB for a 2048² map).
 struct PosteriorSpectra {
     spec: Vec<rustfft::num_complex::Complex64>,
     white: Vec<rustfft::num_complex::Complex64>,
@@ -486,7 +490,7 @@ impl PosteriorSpectra {
         (-(std::f64::consts::TAU * self.blur_px * f).powi(2)).exp()
     }
 
-    /// The Wiener estimate of the terrain under a stationary error of variance `noise_var`,
+    /// The Wiener estimate of the terrain under a stationary error of variance `noise_var` (m²),
     /// plus the draw of the posterior variance; the `w × h` field.
     fn draw(&self, noise_var: f64) -> Vec<f64> {
         let (pw, ph) = (2 * self.w, 2 * self.h);
