@@ -355,13 +355,17 @@ pub fn plausible_truth(dem: &Dem, error: &ErrorModel, seed: u64) -> anyhow::Resu
         spectra.draw(only)
     } else {
         let (lo, hi) = (levels[0].ln(), levels[levels.len() - 1].ln());
-        let rung = |v: f64| ((v.ln() - lo) / (hi - lo) * (levels.len() - 1) as f64).max(0.0);
+        // Each cell's place on the ladder, in rungs.
+        let rung: Vec<f64> = var
+            .iter()
+            .map(|v| ((v.ln() - lo) / (hi - lo) * (levels.len() - 1) as f64).max(0.0))
+            .collect();
         let mut acc = vec![0.0f64; w * h];
         for (k, &level) in levels.iter().enumerate() {
             let d = spectra.draw(level);
-            for ((a, &v), x) in acc.iter_mut().zip(&var).zip(d) {
+            for ((a, &r), x) in acc.iter_mut().zip(&rung).zip(d) {
                 // Hat weights: each cell sums the two rungs around its variance to 1.
-                let wgt = (1.0 - (rung(v) - k as f64).abs()).max(0.0);
+                let wgt = (1.0 - (r - k as f64).abs()).max(0.0);
                 *a += wgt * x;
             }
         }
@@ -682,21 +686,29 @@ mod tests {
         assert!(r.success_at(151.0, 200.0).is_nan());
     }
 
+    /// A `w × h` Gaussian random field: white noise blurred by `blur_px`, scaled to `rms`.
+    fn smooth_field(
+        rng: &mut rand_pcg::Pcg64,
+        w: usize,
+        h: usize,
+        blur_px: f64,
+        rms: f64,
+    ) -> Vec<f64> {
+        let white: Vec<f64> = (0..w * h).map(|_| normal(rng)).collect();
+        let f = crate::insar::pipeline::gaussian_filter(&white, w, h, blur_px);
+        let sd = (f.iter().map(|v| v * v).sum::<f64>() / f.len() as f64).sqrt();
+        f.into_iter().map(|v| v * rms / sd).collect()
+    }
+
     /// A map whose west half is good to 0.5 m and east half to 3 m: the draw departs from it
     /// by each half's own error, not by the mean's 2.2 m everywhere.
     #[test]
     fn plausible_truth_follows_the_error_cell_by_cell() {
         use crate::dem::GeoRef;
-        use crate::insar::pipeline::gaussian_filter;
         let (w, h) = (128, 96);
         let geo = GeoRef::local(0.0, 0.0, 20.0, "test");
         let mut rng = rand_pcg::Pcg64::seed_from_u64(5);
-        let mut field = |blur_px: f64, rms: f64| -> Vec<f64> {
-            let white: Vec<f64> = (0..w * h).map(|_| normal(&mut rng)).collect();
-            let f = gaussian_filter(&white, w, h, blur_px);
-            let sd = (f.iter().map(|v| v * v).sum::<f64>() / f.len() as f64).sqrt();
-            f.into_iter().map(|v| v * rms / sd).collect()
-        };
+        let mut field = |blur_px: f64, rms: f64| smooth_field(&mut rng, w, h, blur_px, rms);
         let terrain = field(6.0, 3.0);
         let noise = field(22.4 / 20.0, 1.0);
         let sd = |i: usize| if i % w < w / 2 { 0.5f32 } else { 3.0 };
@@ -736,16 +748,10 @@ mod tests {
     #[test]
     fn plausible_truth_has_the_terrains_texture_and_differs_by_the_error() {
         use crate::dem::GeoRef;
-        use crate::insar::pipeline::gaussian_filter;
         let (w, h) = (128, 128);
         let geo = GeoRef::local(0.0, 0.0, 20.0, "test");
         let mut rng = rand_pcg::Pcg64::seed_from_u64(11);
-        let mut field = |blur_px: f64, rms: f64| -> Vec<f64> {
-            let white: Vec<f64> = (0..w * h).map(|_| normal(&mut rng)).collect();
-            let f = gaussian_filter(&white, w, h, blur_px);
-            let sd = (f.iter().map(|v| v * v).sum::<f64>() / f.len() as f64).sqrt();
-            f.into_iter().map(|v| v * rms / sd).collect()
-        };
+        let mut field = |blur_px: f64, rms: f64| smooth_field(&mut rng, w, h, blur_px, rms);
         // Gentle terrain (smooth, 3 m rms) under a map error of 2 m, blurred by 22.4 m.
         let terrain = field(6.0, 3.0);
         let noise = field(22.4 / 20.0, 2.0);
