@@ -42,7 +42,8 @@ pub struct NavConfig {
     pub msac: MsacConfig,
     /// Quality gate.
     pub gate: GateConfig,
-    /// A fix farther than this many combined σ from the prior is refused.
+    /// A fix farther than this many combined σ from the prior (Mahalanobis length under the
+    /// prior's and the fix's position covariances summed) is refused.
     pub prior_gate_sigmas: f32,
     /// When the frame is finer than the tile, ignore frame keypoints smaller than the tile's
     /// smallest scale (in frame pixels) so the keypoint budget goes to matchable detail.
@@ -482,7 +483,7 @@ impl<'t> Navigator<'t> {
     }
 
     /// With a prior and no fix, search the prior's window by slope correlation; a hit the
-    /// refinement confirms (converged, correlation ≥ the gate's `verify_min_ncc`) and the prior
+    /// refinement confirms (converged, correlation ≥ the search's `min_fine_ncc`) and the prior
     /// gate accepts becomes the fix, with the refinement's covariance.
     fn area_search(
         &self,
@@ -515,7 +516,7 @@ impl<'t> Navigator<'t> {
         };
         // A refused hit leaves the refinement's verdict in the report (why no fix).
         let r = match refine(img, k, raster, &hit.affine, info, &rcfg) {
-            Ok(r) if r.ncc_after >= self.cfg.gate.verify_min_ncc => r,
+            Ok(r) if r.ncc_after >= self.cfg.search.min_fine_ncc => r,
             Ok(_) => {
                 report.refine = Some(Err(RefineError::WorseCorrelation));
                 return;
@@ -547,9 +548,17 @@ impl<'t> Navigator<'t> {
                 fix.center_tile_px[0] - p.center_tile_px[0] as f64,
                 fix.center_tile_px[1] - p.center_tile_px[1] as f64,
             );
-            let var = (p.sigma_px as f64) * (p.sigma_px as f64) + fix.center_cov_tile_px2[0][0];
+            // The offset's Mahalanobis length under the prior's and the fix's covariances
+            // together: a fix elongated along one axis (a ridge, a bowl's rotation) is gated
+            // by its own ellipse, not by its x variance alone.
+            let sp2 = (p.sigma_px as f64) * (p.sigma_px as f64);
+            let c = &fix.center_cov_tile_px2;
+            let (sxx, sxy, syy) = (sp2 + c[0][0], 0.5 * (c[0][1] + c[1][0]), sp2 + c[1][1]);
+            let det = sxx * syy - sxy * sxy;
+            let d2 = (syy * dx * dx - 2.0 * sxy * dx * dy + sxx * dy * dy) / det;
             let gate = self.cfg.prior_gate_sigmas as f64;
-            if dx * dx + dy * dy > gate * gate * var {
+            // A covariance that is not positive definite cannot pass the gate (NaN fails too).
+            if !(det > 0.0 && d2 <= gate * gate) {
                 report.outcome = Err(NoFix::InconsistentWithPrior);
             }
         }

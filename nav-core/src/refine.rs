@@ -584,6 +584,7 @@ pub fn refine(
     let mut ncc_before = 0.0f32;
     let mut converged = false;
     let mut done = 0u8;
+    let (mut damp, mut prev_b, mut prev_zb) = (1.0f64, [0.0f64; 6], 0.0f64);
     let last = loop {
         let model = PassModel {
             gain: g,
@@ -607,6 +608,21 @@ pub fn refine(
             return Err(RefineError::Singular);
         };
         let z: [f64; 6] = chol.solve(&b).into();
+        // A step that turns back on more than half of the last one (zₖᵀ·b₋₁ < −½·zₖ₋₁ᵀ·b₋₁,
+        // the last pass' metric, b₋₁ = H₋₁·zₖ₋₁) says the iteration oscillates without
+        // decaying: where the frame's Jacobian misjudges the curvature of a weak direction,
+        // plain Gauss–Newton settles into a two-cycle there and never converges (InSAR
+        // fresh-crater floor, docs/registration.md). Halve the step length then, for good. A
+        // reversal that decays on its own is left alone: on truth-built tiles the fix is good
+        // to 0.01 px, and damping those changed where 0.03 px convergence stopped (mean NEES
+        // 1.97 → 2.4 on the LOLA scene).
+        let back: f64 = z.iter().zip(prev_b.iter()).map(|(a, c)| a * c).sum();
+        if back < -0.5 * prev_zb {
+            damp *= 0.5;
+        }
+        prev_zb = z.iter().zip(b.iter()).map(|(a, c)| a * c).sum();
+        prev_b = b.into();
+        let z = z.map(|v| v * damp);
         let [z0, z1, dx, dy, dg, d_o] = z;
         let (da, db) = (1.0 + z0, z1);
         let det = da * da + db * db;
@@ -1008,6 +1024,47 @@ mod tests {
         assert!(
             with_band > 5.0 * without && with_band > 0.05,
             "border kept: centre {with_band} px off (left out: {without})"
+        );
+    }
+
+    /// A frame whose fine slope texture is a third as strong as the reference's (its broad
+    /// slopes as strong): its Jacobian underrates the fit's curvature, so a plain
+    /// Gauss–Newton step overshoots about threefold and the iteration swings ever wider (the
+    /// default refinement without the step control failed here: "did not converge"). With it
+    /// the refinement must converge inside the budget to a fixed point: started again from
+    /// its own answer, it stays there. (The fixed point is a few tenths of a degree off the
+    /// truth: the altered texture biases it, which is not what this test is about.)
+    #[test]
+    fn an_overshooting_jacobian_still_converges() {
+        let bytes = tile_bytes(Some(&reference()));
+        let tile = Tile::parse(&bytes).unwrap();
+        let raster = tile.slope_raster().unwrap();
+        let truth = similarity_at(30.0, 0.8, 40.0, 20.0);
+        let px: Vec<SlopePx> = (0..60 * 60)
+            .map(|i| {
+                let (x, y) = truth.apply((i % 60) as f64, (i / 60) as f64);
+                let fine = 6.0 * libm::sin(0.21 * x + 0.4) * libm::cos(0.17 * y - 0.3)
+                    + 3.0 * libm::cos(0.31 * y + 0.05 * x);
+                slope_from_deg((field(x, y) - fine + fine / 3.0) as f32)
+            })
+            .collect();
+        let img = SlopeImage::new_checked(&px, 60, 60, 16.0).unwrap();
+        let start = similarity_at(31.0, 0.8, 40.8, 19.4);
+        let cfg = RefineConfig::default();
+        let r = refine(&img, 1, raster, &start, &FrameInfo::default(), &cfg).unwrap();
+        assert!(r.iterations < 20, "{r:?}");
+        assert_maps_agree(
+            &r.affine,
+            &truth,
+            &[(0.0, 0.0), (59.0, 59.0), (30.0, 10.0)],
+            1.5,
+        );
+        let again = refine(&img, 1, raster, &r.affine, &FrameInfo::default(), &cfg).unwrap();
+        assert_maps_agree(
+            &again.affine,
+            &r.affine,
+            &[(0.0, 0.0), (59.0, 59.0), (30.0, 10.0)],
+            0.05,
         );
     }
 

@@ -412,7 +412,7 @@ pub fn write_csv_trials(path: &Path, trials: &[usize], rows: &[TrnScore]) -> any
     );
     writeln!(
         csv,
-        "trial,x_m,y_m,heading_deg,pixel_m,fix,false_fix,features,matches,inliers,rotation_deg,heading_err_deg,scale,scale_truth,pos_err_m,err_east_m,err_north_m,center_err_px,reg_err_mean_px,reg_err_max_px,center_sigma_m,nees,heading_sigma_deg,time_ms,refined,ncc,refined_sigma_m,refine_note,area_search,no_fix_reason"
+        "trial,x_m,y_m,heading_deg,pixel_m,fix,false_fix,features,matches,inliers,rotation_deg,heading_err_deg,scale,scale_truth,pos_err_m,err_east_m,err_north_m,center_err_px,reg_err_mean_px,reg_err_max_px,center_sigma_m,nees,heading_sigma_deg,time_ms,refined,ncc,refined_sigma_m,refine_iterations,refine_note,area_search,no_fix_reason"
     )?;
     let o = |v: Option<f64>| v.map_or(String::new(), |x| format!("{x:.6}"));
     for (i, r) in trials.iter().zip(rows) {
@@ -424,7 +424,7 @@ pub fn write_csv_trials(path: &Path, trials: &[usize], rows: &[TrnScore]) -> any
         });
         writeln!(
             csv,
-            "{i},{:.3},{:.3},{:.4},{:.4},{},{},{},{},{},{},{},{},{:.6},{},{},{},{},{},{},{},{},{},{:.3},{},{},{},{},{},{}",
+            "{i},{:.3},{:.3},{:.4},{:.4},{},{},{},{},{},{},{},{},{:.6},{},{},{},{},{},{},{},{},{},{:.3},{},{},{},{},{},{},{}",
             t.x_m,
             t.y_m,
             t.heading_rad.to_degrees(),
@@ -451,6 +451,7 @@ pub fn write_csv_trials(path: &Path, trials: &[usize], rows: &[TrnScore]) -> any
             r.refined,
             o(r.ncc.map(f64::from)),
             o(r.refined_sigma_m),
+            r.refine_iterations.map_or(String::new(), |n| n.to_string()),
             r.refine_note.as_deref().unwrap_or(""),
             r.area_search,
             r.no_fix_reason.as_deref().unwrap_or("")

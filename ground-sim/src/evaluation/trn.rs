@@ -52,6 +52,9 @@ pub struct TrnScore {
     /// covariance; the fix itself reports the feature covariance in `center_sigma_m`).
     #[serde(with = "crate::evaluation::shard::opt_f64")]
     pub refined_sigma_m: Option<f64>,
+    /// Gauss–Newton updates the applied refinement made (`Refined::iterations`).
+    #[serde(default)]
+    pub refine_iterations: Option<u8>,
     /// Estimated rotation, degrees.
     #[serde(with = "crate::evaluation::shard::opt_f64")]
     pub rotation_deg: Option<f64>,
@@ -152,6 +155,7 @@ pub fn score(
         match run.report.refine {
             Some(Ok(r)) if f.refined => {
                 s.ncc = Some(r.ncc_after);
+                s.refine_iterations = Some(r.iterations);
                 let c = r.center_cov_tile_px2;
                 s.refined_sigma_m = Some((0.5 * (c[0][0] + c[1][1])).max(0.0).sqrt() * h.pixel_m());
             }
