@@ -20,7 +20,8 @@ const SMALLEST_SCALE_PX: f32 = 2.5;
 pub struct Prior {
     /// Predicted frame centre in tile pixels `[x, y]`.
     pub center_tile_px: [f32; 2],
-    /// 1σ position uncertainty, tile pixels (isotropic).
+    /// 1σ position uncertainty, tile pixels (isotropic). `f32::INFINITY` says nothing about
+    /// the position (no prior gate); NaN refuses every fix the prior would gate.
     pub sigma_px: f32,
     /// Predicted heading (frame +x axis in tile axes), radians.
     pub heading_rad: f32,
@@ -483,7 +484,7 @@ impl<'t> Navigator<'t> {
     }
 
     /// With a prior and no fix, search the prior's window by slope correlation; a hit the
-    /// refinement confirms (converged, correlation ≥ the search's `min_fine_ncc`) and the prior
+    /// refinement confirms (converged, correlation ≥ the search's `confirm_min_ncc`) and the prior
     /// gate accepts becomes the fix, with the refinement's covariance.
     fn area_search(
         &self,
@@ -516,7 +517,7 @@ impl<'t> Navigator<'t> {
         };
         // A refused hit leaves the refinement's verdict in the report (why no fix).
         let r = match refine(img, k, raster, &hit.affine, info, &rcfg) {
-            Ok(r) if r.ncc_after >= self.cfg.search.min_fine_ncc => r,
+            Ok(r) if r.ncc_after >= self.cfg.search.confirm_min_ncc => r,
             Ok(_) => {
                 report.refine = Some(Err(RefineError::WorseCorrelation));
                 return;
@@ -544,21 +545,8 @@ impl<'t> Navigator<'t> {
     /// Refuse a fix farther from the prior than its gate allows.
     fn prior_gate(&self, report: &mut FrameReport, prior: Option<&Prior>) {
         if let (Ok(fix), Some(p)) = (&report.outcome, prior) {
-            let (dx, dy) = (
-                fix.center_tile_px[0] - p.center_tile_px[0] as f64,
-                fix.center_tile_px[1] - p.center_tile_px[1] as f64,
-            );
-            // The offset's Mahalanobis length under the prior's and the fix's covariances
-            // together: a fix elongated along one axis (a ridge, a bowl's rotation) is gated
-            // by its own ellipse, not by its x variance alone.
-            let sp2 = (p.sigma_px as f64) * (p.sigma_px as f64);
-            let c = &fix.center_cov_tile_px2;
-            let (sxx, sxy, syy) = (sp2 + c[0][0], 0.5 * (c[0][1] + c[1][0]), sp2 + c[1][1]);
-            let det = sxx * syy - sxy * sxy;
-            let d2 = (syy * dx * dx - 2.0 * sxy * dx * dy + sxx * dy * dy) / det;
             let gate = self.cfg.prior_gate_sigmas as f64;
-            // A covariance that is not positive definite cannot pass the gate (NaN fails too).
-            if !(det > 0.0 && d2 <= gate * gate) {
+            if !within_prior_gate(fix.center_tile_px, &fix.center_cov_tile_px2, p, gate) {
                 report.outcome = Err(NoFix::InconsistentWithPrior);
             }
         }
@@ -761,5 +749,66 @@ impl<'t> Navigator<'t> {
             report.needed_confirmation = report.outcome.is_ok();
         }
         report
+    }
+}
+
+/// Whether a fix centred at `center` (tile pixels) with position covariance `c` (tile px²)
+/// lies within `gate` σ of the prior: the Mahalanobis length of the offset of centres under
+/// the prior's and the fix's covariances summed. A fix
+/// elongated along one axis (a ridge, a bowl's rotation) is gated by its own ellipse, not by
+/// one axis' variance. An infinite prior σ constrains nothing; a covariance that is not
+/// positive definite, or NaN anywhere, fails.
+fn within_prior_gate(center: [f64; 2], c: &[[f64; 2]; 2], p: &Prior, gate: f64) -> bool {
+    if p.sigma_px == f32::INFINITY {
+        return true;
+    }
+    let (dx, dy) = (
+        center[0] - p.center_tile_px[0] as f64,
+        center[1] - p.center_tile_px[1] as f64,
+    );
+    let sp2 = (p.sigma_px as f64) * (p.sigma_px as f64);
+    let (sxx, sxy, syy) = (sp2 + c[0][0], 0.5 * (c[0][1] + c[1][0]), sp2 + c[1][1]);
+    let det = sxx * syy - sxy * sxy;
+    let d2 = (syy * dx * dx - 2.0 * sxy * dx * dy + sxx * dy * dy) / det;
+    sxx > 0.0 && det > 0.0 && d2 <= gate * gate
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn gate(x: f64, y: f64, cov: [[f64; 2]; 2], p: &Prior) -> bool {
+        within_prior_gate([x, y], &cov, p, 5.0)
+    }
+
+    fn prior(sigma_px: f32) -> Prior {
+        Prior {
+            center_tile_px: [100.0, 100.0],
+            sigma_px,
+            heading_rad: 0.0,
+            heading_sigma_rad: 0.1,
+            scale: 0.5,
+            scale_sigma: 0.02,
+        }
+    }
+
+    #[test]
+    fn the_prior_gate_reads_the_whole_ellipse() {
+        // Prior σ 1 px; the fix is 20 px off along y, and its own σ along y is 6 px (along x
+        // 0.1 px): 20 / √(1 + 36) = 3.3σ passes a 5σ gate; x's variance alone would say 20σ.
+        let long_y = [[0.01, 0.0], [0.0, 36.0]];
+        assert!(gate(100.0, 120.0, long_y, &prior(1.0)));
+        // The same offset along x, where the ellipse is narrow, fails.
+        assert!(!gate(120.0, 100.0, long_y, &prior(1.0)));
+        // Correlation counts: an ellipse along the diagonal passes a diagonal offset and
+        // refuses the crossing one.
+        let diag = [[18.0, 17.9], [17.9, 18.0]];
+        assert!(gate(114.0, 114.0, diag, &prior(1.0)));
+        assert!(!gate(114.0, 86.0, diag, &prior(1.0)));
+        // An infinite prior σ gates nothing; NaN anywhere refuses.
+        assert!(gate(900.0, -900.0, long_y, &prior(f32::INFINITY)));
+        assert!(!gate(100.0, 100.0, long_y, &prior(f32::NAN)));
+        let nan = [[f64::NAN, 0.0], [0.0, 1.0]];
+        assert!(!gate(100.0, 100.0, nan, &prior(1.0)));
     }
 }

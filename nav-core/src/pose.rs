@@ -66,10 +66,12 @@ pub struct GateConfig {
     pub min_inliers_verified: u16,
     /// Smallest refined correlation that confirms a fix of fewer than `min_inliers` inliers.
     pub verify_min_ncc: f32,
-    /// Refuse any fix the dense refinement contradicts: it converged to a correlation below
-    /// `verify_min_ncc`, correlated worse than the feature fix, or slid away from it. True
-    /// alignments correlate at 0.9–0.97 (truth and InSAR tiles), wrong ones at ≤ 0.1; a false
-    /// fix is worse than no fix.
+    /// Refuse any feature fix the dense refinement contradicts: it converged to a correlation
+    /// below `verify_min_ncc`, correlated worse than the feature fix, or slid away from it.
+    /// True alignments of cratered terrain correlate at 0.9–0.97 (truth and InSAR tiles), wrong
+    /// ones at ≤ 0.15; a false fix is worse than no fix. (An InSAR map of smooth plains
+    /// correlates lower at the truth, 0.6–0.7; the area search confirms its hits at its own
+    /// `SearchConfig::confirm_min_ncc`.)
     pub reject_contradicted: bool,
     /// Smallest spread of the inliers in the frame: the square root of the smaller eigenvalue of
     /// their covariance, frame pixels. Clustered or collinear inliers constrain rotation poorly.

@@ -37,6 +37,12 @@ use nalgebra::{SMatrix, SVector};
 /// Hard cap on Gauss–Newton iterations, whatever the configuration says.
 pub const MAX_ITERATIONS: u8 = 20;
 
+/// Smallest step length the step control may shrink to (three halvings). Convergence is judged
+/// on the applied step, so with the step length at this floor a "converged" refinement's full
+/// Gauss–Newton step is below `converge_px / MIN_STEP_LENGTH`; an iteration that still swings
+/// there runs out of iterations and is refused (`NotConverged`), as before the step control.
+pub const MIN_STEP_LENGTH: f64 = 0.125;
+
 /// How much lower than under the feature fix the refined correlation may be. NCC is not the
 /// objective (the Huber-weighted photometric residual is), so a better alignment can correlate
 /// a hair worse: measured −0.0003 on a frame whose rotation error fell from 0.077° to 0.007°.
@@ -608,17 +614,17 @@ pub fn refine(
             return Err(RefineError::Singular);
         };
         let z: [f64; 6] = chol.solve(&b).into();
-        // A step that turns back on more than half of the last one (zₖᵀ·b₋₁ < −½·zₖ₋₁ᵀ·b₋₁,
-        // the last pass' metric, b₋₁ = H₋₁·zₖ₋₁) says the iteration oscillates without
-        // decaying: where the frame's Jacobian misjudges the curvature of a weak direction,
-        // plain Gauss–Newton settles into a two-cycle there and never converges (InSAR
-        // fresh-crater floor, docs/registration.md). Halve the step length then, for good. A
-        // reversal that decays on its own is left alone: on truth-built tiles the fix is good
-        // to 0.01 px, and damping those changed where 0.03 px convergence stopped (mean NEES
-        // 1.97 → 2.4 on the LOLA scene).
+        // A full Gauss–Newton step that turns back on more than half of the last full step
+        // (zₖᵀ·b₋₁ < −½·zₖ₋₁ᵀ·b₋₁ in the last pass' metric, b₋₁ = H₋₁·zₖ₋₁) says the iteration
+        // oscillates without decaying: where the frame's Jacobian misjudges the curvature of a
+        // weak direction, plain Gauss–Newton settles into a two-cycle there and never converges
+        // (InSAR fresh-crater floor, docs/registration.md). Halve the step length then, for the
+        // rest of the refinement, down to [`MIN_STEP_LENGTH`]. A reversal that decays on its
+        // own is left alone: on truth-built tiles the fix is good to 0.01 px, and damping those
+        // moved where the 0.03 px test stopped (LOLA scene: mean NEES 1.97 → 2.25–2.38).
         let back: f64 = z.iter().zip(prev_b.iter()).map(|(a, c)| a * c).sum();
         if back < -0.5 * prev_zb {
-            damp *= 0.5;
+            damp = (damp * 0.5).max(MIN_STEP_LENGTH);
         }
         prev_zb = z.iter().zip(b.iter()).map(|(a, c)| a * c).sum();
         prev_b = b.into();

@@ -24,7 +24,7 @@
 //!    [`SearchConfig::min_margin`] somewhere on the path, [`MAX_VALLEY_STEPS`] points at most),
 //!    are runners: the winner must beat every runner by [`SearchConfig::min_margin`];
 //! 4. the best fine candidate starts the Gauss–Newton refinement. The fix stands only if the
-//!    refinement converges to a correlation of at least [`SearchConfig::min_fine_ncc`] and the best
+//!    refinement converges to a correlation of at least [`SearchConfig::confirm_min_ncc`] and the best
 //!    peak stands clear of every other ([`SearchConfig::min_margin`]): a second, nearly as good
 //!    alignment beyond a valley means the terrain is ambiguous, and no fix is safer. A ridge
 //!    without a valley (a frame along a crater rim) is one peak: the refinement settles where on
@@ -87,24 +87,30 @@ pub struct SearchConfig {
     /// correlates with nothing in the window stops here, before the costlier levels).
     pub min_coarse_ncc: f32,
     /// The winner's correlation (NCC, −1 to 1) on the fine grid must reach this, or the search
-    /// ends without a hit; the refinement that confirms the hit must hold it too. Only the
-    /// coarse top's fine peak is tested: a window whose top is not the match gives no fix, as
-    /// it did before as "two peaks alike".
-    ///
-    /// Why not the feature path's `verify_min_ncc` (0.7) for the confirmation: that gate stands
-    /// in for a consensus of too few inliers, and was set on truth-built tiles, where true
-    /// alignments read 0.90–0.95. A hit has passed the window's own tests instead (a clear
-    /// peak, a margin over every runner beyond a valley, the prior gate), and where the
-    /// reference's noise is as strong as the terrain's texture (an InSAR map of smooth
-    /// plains) the true alignment itself correlates below 0.7: at seed 2, 35 of 300 plains
-    /// frames were right (error ≤ 7 m, within their 3σ) at NCC 0.61–0.70 and were refused.
+    /// ends without a hit. Only the coarse top's fine peak is tested: a window whose top is not
+    /// the match gives no fix, as it did before as "two peaks alike".
     pub min_fine_ncc: f32,
+    /// The refinement that confirms a hit must converge to at least this correlation (NCC of
+    /// frame and reference slope over the refinement's samples; the refinement's own
+    /// `min_ncc` applies too).
+    ///
+    /// Why not the feature path's `verify_min_ncc` (0.7): that gate stands in for a consensus
+    /// of too few inliers, which lost in space can be a coincidence anywhere on the tile, and
+    /// was set on truth-built tiles, where true alignments read 0.90–0.95. A hit is confined to
+    /// the prior's window and has passed its own tests (a clear fine peak, a margin over every
+    /// runner beyond a valley, the prior gate after), and where the reference's noise is as
+    /// strong as the terrain's texture (an InSAR map of smooth plains) the true alignment
+    /// itself correlates below 0.7: at seed 2, 35 of 300 plains frames were right (error ≤ 7 m,
+    /// within their 3σ) at NCC 0.61–0.70 and were refused. Wrong alignments refined from
+    /// wrong starts read ≤ 0.15 (`dense_check_does_not_confirm_wrong_starts`).
+    pub confirm_min_ncc: f32,
     /// Sample budget of the refinement that confirms a hit (the feature path's refinement uses
     /// [`crate::refine::RefineConfig::max_samples`]); smaller because the search has already
     /// spent part of the frame's instruction budget.
     pub refine_max_samples: u32,
     /// Gauss–Newton iterations of that refinement at most (a hit starts within about a pixel
-    /// and a degree: 3–6 updates converge).
+    /// and a degree; with the step control, InSAR fresh-floor hits took 3–15 updates, 18 of 296
+    /// more than 10).
     pub refine_max_iterations: u8,
 }
 
@@ -119,6 +125,7 @@ impl Default for SearchConfig {
             min_valid_fraction: 0.7,
             min_coarse_ncc: 0.3,
             min_fine_ncc: 0.5,
+            confirm_min_ncc: 0.5,
             refine_max_samples: 800,
             refine_max_iterations: 16,
         }
