@@ -754,10 +754,9 @@ impl<'t> Navigator<'t> {
 
 /// Whether a fix centred at `center` (tile pixels) with position covariance `c` (tile px²)
 /// lies within `gate` σ of the prior: the Mahalanobis length of the offset of centres under
-/// the prior's and the fix's covariances summed. A fix
-/// elongated along one axis (a ridge, a bowl's rotation) is gated by its own ellipse, not by
-/// one axis' variance. An infinite prior σ constrains nothing; a covariance that is not
-/// positive definite, or NaN anywhere, fails.
+/// the prior's and the fix's covariances summed. A fix elongated along one axis (a ridge, a
+/// bowl's rotation) is gated by its own ellipse, not by one axis' variance. An infinite prior
+/// σ constrains nothing; a covariance that is not positive definite, or NaN anywhere, fails.
 fn within_prior_gate(center: [f64; 2], c: &[[f64; 2]; 2], p: &Prior, gate: f64) -> bool {
     if p.sigma_px == f32::INFINITY {
         return true;

@@ -24,8 +24,8 @@
 //!    [`SearchConfig::min_margin`] somewhere on the path, [`MAX_VALLEY_STEPS`] points at most),
 //!    are runners: the winner must beat every runner by [`SearchConfig::min_margin`];
 //! 4. the best fine candidate starts the Gauss–Newton refinement. The fix stands only if the
-//!    refinement converges to a correlation of at least [`SearchConfig::confirm_min_ncc`] and the best
-//!    peak stands clear of every other ([`SearchConfig::min_margin`]): a second, nearly as good
+//!    refinement converges to a correlation of at least [`SearchConfig::confirm_min_ncc`] and
+//!    the best peak stands clear of every other ([`SearchConfig::min_margin`]): a second, nearly as good
 //!    alignment beyond a valley means the terrain is ambiguous, and no fix is safer. A ridge
 //!    without a valley (a frame along a crater rim) is one peak: the refinement settles where on
 //!    it the frame lies, with a covariance that says how well, or refuses it as singular.
@@ -102,7 +102,8 @@ pub struct SearchConfig {
     /// strong as the terrain's texture (an InSAR map of smooth plains) the true alignment
     /// itself correlates below 0.7: at seed 2, 35 of 300 plains frames were right (error ≤ 7 m,
     /// within their 3σ) at NCC 0.61–0.70 and were refused. Wrong alignments refined from
-    /// wrong starts read ≤ 0.15 (`dense_check_does_not_confirm_wrong_starts`).
+    /// wrong starts read ≤ 0.153 (`dense_check_does_not_confirm_wrong_starts`). 0.5 is the
+    /// fine level's and the refinement's own floor, not a value swept on a campaign.
     pub confirm_min_ncc: f32,
     /// Sample budget of the refinement that confirms a hit (the feature path's refinement uses
     /// [`crate::refine::RefineConfig::max_samples`]); smaller because the search has already
