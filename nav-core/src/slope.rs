@@ -106,7 +106,7 @@ fn gauss_weights(sigma_px: f32) -> ([f32; MAX_SMOOTH_RADIUS + 1], usize) {
 /// resolution as a reference tile whose DEM was smoothed by the same σ in metres (see
 /// `TileHeader::smoothing_m`). Smoothing is normalised over valid heights and never fills:
 /// a missing height stays missing. `CAP` is the widest binned row the stack rings hold
-/// (`(5 + 2·MAX_SMOOTH_RADIUS + 1 + 3 + 2) · CAP · 4` bytes of stack: 116 KiB for 1024, 23 KiB
+/// (`(5 + 2·MAX_SMOOTH_RADIUS + 1 + 3 + 4) · CAP · 4` bytes of stack: 124 KiB for 1024, 24 KiB
 /// for the flight frame's 200).
 pub fn slope_into_binned_smoothed<'b, const CAP: usize>(
     dem: &DemPatch<'_>,
@@ -145,11 +145,24 @@ pub fn slope_into_binned_smoothed<'b, const CAP: usize>(
     let ring = 2 * rad + 1;
     // Streaming over coarse rows: block means into a 5-row ring, filled heights into a
     // (2R + 1)-row ring, smoothed heights into a 3-row ring, slope written R + 1 rows behind.
+    // `DemPatch::height_at`'s validity: finite and not the nodata value (none: NaN, which no
+    // height equals).
+    let (dem_w, heights) = (dem.width(), dem.heights_m());
+    let nd = dem.nodata_m().unwrap_or(f32::NAN);
     let mut raw = [[f32::NAN; CAP]; 5];
     let mut fil = [[f32::NAN; CAP]; SMOOTH_RING];
     let mut smo = [[f32::NAN; CAP]; 3];
     let mut num = [0.0f32; CAP];
     let mut den = [0.0f32; CAP];
+    // Missing-height columns among columns 0..=c of the row (prefix counts), the normalisers of
+    // clean windows and the `drow` they were computed for, and the kernel as 2R + 1 taps.
+    let mut nbad = [0u32; CAP];
+    let mut dconst = [0.0f32; CAP];
+    let mut dconst_for = f32::NAN;
+    let mut wfull = [0.0f32; SMOOTH_RING];
+    for (i, v) in wfull.iter_mut().enumerate().take(ring) {
+        *v = wt.get(i.abs_diff(rad)).copied().unwrap_or(0.0);
+    }
     // A function, not a closure: the compiler inlines it into every caller, which keeps the
     // firmware's slope stage at the same cost whoever calls this (HIL profile, session 12).
     #[inline(always)]
@@ -174,21 +187,56 @@ pub fn slope_into_binned_smoothed<'b, const CAP: usize>(
         if r_in < h
             && let Some(row) = raw.get_mut(r_in % 5)
         {
-            for (c, slot) in row.iter_mut().take(w).enumerate() {
-                let (mut sum, mut cnt) = (0.0f32, 0usize);
-                for j in 0..k {
-                    for i in 0..k {
-                        if let Some(z) = dem.height_at(c * k + i, r_in * k + j) {
-                            sum += z;
-                            cnt += 1;
+            // 2 × 2 blocks (10 m frames on 20 m tiles) from two row slices: the heights of
+            // `DemPatch::height_at`, in its order, without its per-call checks.
+            let (top, bot) = (2 * r_in * dem_w, (2 * r_in + 1) * dem_w);
+            let pairs = (k == 2)
+                .then(|| {
+                    heights
+                        .get(top..top + 2 * w)
+                        .zip(heights.get(bot..bot + 2 * w))
+                })
+                .flatten();
+            if let Some((top, bot)) = pairs {
+                for ((slot, t), b) in row
+                    .iter_mut()
+                    .zip(top.chunks_exact(2))
+                    .zip(bot.chunks_exact(2))
+                {
+                    let (mut sum, mut cnt) = (0.0f32, 0usize);
+                    let (&[z0, z1], &[z2, z3]) = (t, b) else {
+                        continue;
+                    };
+                    for z in [z0, z1, z2, z3] {
+                        // Branch-free; adding +0 for a refused height leaves the sum's bits
+                        // as they were (it starts at +0, so it is never −0).
+                        let ok = z.is_finite() && z != nd;
+                        sum += if ok { z } else { 0.0 };
+                        cnt += usize::from(ok);
+                    }
+                    *slot = if cnt >= half {
+                        sum / cnt as f32
+                    } else {
+                        f32::NAN
+                    };
+                }
+            } else {
+                for (c, slot) in row.iter_mut().take(w).enumerate() {
+                    let (mut sum, mut cnt) = (0.0f32, 0usize);
+                    for j in 0..k {
+                        for i in 0..k {
+                            if let Some(z) = dem.height_at(c * k + i, r_in * k + j) {
+                                sum += z;
+                                cnt += 1;
+                            }
                         }
                     }
+                    *slot = if cnt >= half {
+                        sum / cnt as f32
+                    } else {
+                        f32::NAN
+                    };
                 }
-                *slot = if cnt >= half {
-                    sum / cnt as f32
-                } else {
-                    f32::NAN
-                };
             }
         }
         // Filled row F = r_in − 1 needs raw rows F − 1 ..= F + 1.
@@ -197,9 +245,13 @@ pub fn slope_into_binned_smoothed<'b, const CAP: usize>(
             && (f as usize) < h
             && let Some(dst) = fil.get_mut(f as usize % ring)
         {
+            let centre = raw.get(f as usize % 5);
             for (c, slot) in dst.iter_mut().take(w).enumerate() {
                 let ci = c as isize;
-                let v = get(&raw, 5, f, ci);
+                let v = centre
+                    .and_then(|row| row.get(c))
+                    .copied()
+                    .unwrap_or(f32::NAN);
                 *slot = if !v.is_nan() || !fill_isolated {
                     v
                 } else {
@@ -223,6 +275,14 @@ pub fn slope_into_binned_smoothed<'b, const CAP: usize>(
         }
         // Smoothed row G = r_in − 1 − R needs filled rows G − R ..= G + R. Separable and
         // normalised over valid heights: vertical sums per column, then along the row.
+        //
+        // The sums are those of the plain normalised convolution, term for term and in the
+        // same order (so host, target and earlier results agree bit for bit), but the common
+        // case is cheap: a column with no missing height in its window has the row's weight
+        // sum `drow` as its normaliser, and a window of such columns has a normaliser fixed
+        // per column position (`dconst`). Only windows touching a missing height sum the
+        // normalisers term by term (HIL: the smoothing cost ≈ 1 000 instructions a binned
+        // pixel before, session 28).
         let g = r_in as isize - 1 - ri;
         if g >= 0
             && (g as usize) < h
@@ -232,22 +292,82 @@ pub fn slope_into_binned_smoothed<'b, const CAP: usize>(
             if rad == 0 {
                 *dst = *centre_row;
             } else {
-                num.iter_mut().for_each(|v| *v = 0.0);
-                den.iter_mut().for_each(|v| *v = 0.0);
-                for d in -ri..=ri {
-                    let rr = g + d;
-                    if rr < 0 || rr as usize >= h {
-                        continue;
-                    }
+                let (lo_d, hi_d) = ((-ri).max(-g), ri.min(h as isize - 1 - g));
+                let mut drow = 0.0f32;
+                for d in lo_d..=hi_d {
+                    drow += wt.get(d.unsigned_abs()).copied().unwrap_or(0.0);
+                }
+                num.iter_mut().take(w).for_each(|v| *v = 0.0);
+                // Unconditional: a missing height turns the column's sum into NaN, and the
+                // column is summed again below, skipping it. Four rows a sweep (one load and
+                // store of each column's sum per four terms), terms still in row order.
+                let wrow = |d: isize| {
                     let wd = wt.get(d.unsigned_abs()).copied().unwrap_or(0.0);
-                    let Some(src) = fil.get(rr as usize % ring) else {
+                    fil.get((g + d) as usize % ring).map(|r| (wd, r))
+                };
+                let mut d = lo_d;
+                while d + 3 <= hi_d {
+                    if let (Some((w0, r0)), Some((w1, r1)), Some((w2, r2)), Some((w3, r3))) =
+                        (wrow(d), wrow(d + 1), wrow(d + 2), wrow(d + 3))
+                    {
+                        let rows = r0.iter().zip(r1).zip(r2).zip(r3);
+                        for (a, (((&z0, &z1), &z2), &z3)) in num.iter_mut().zip(rows).take(w) {
+                            let mut v = *a;
+                            v += w0 * z0;
+                            v += w1 * z1;
+                            v += w2 * z2;
+                            v += w3 * z3;
+                            *a = v;
+                        }
+                    }
+                    d += 4;
+                }
+                while d <= hi_d {
+                    if let Some((wd, src)) = wrow(d) {
+                        for (a, &z) in num.iter_mut().zip(src.iter()).take(w) {
+                            *a += wd * z;
+                        }
+                    }
+                    d += 1;
+                }
+                let mut bad_run = 0u32;
+                for c in 0..w {
+                    let (Some(a), Some(b), Some(nb)) =
+                        (num.get_mut(c), den.get_mut(c), nbad.get_mut(c))
+                    else {
                         continue;
                     };
-                    for ((&z, a), b) in src.iter().zip(num.iter_mut()).zip(den.iter_mut()).take(w) {
-                        if !z.is_nan() {
-                            *a += wd * z;
-                            *b += wd;
+                    if a.is_nan() {
+                        let (mut sa, mut sb) = (0.0f32, 0.0f32);
+                        for d in lo_d..=hi_d {
+                            let wd = wt.get(d.unsigned_abs()).copied().unwrap_or(0.0);
+                            let z = fil
+                                .get((g + d) as usize % ring)
+                                .and_then(|row| row.get(c))
+                                .copied()
+                                .unwrap_or(f32::NAN);
+                            if !z.is_nan() {
+                                sa += wd * z;
+                                sb += wd;
+                            }
                         }
+                        (*a, *b) = (sa, sb);
+                        bad_run += 1;
+                    } else {
+                        *b = drow;
+                    }
+                    *nb = bad_run;
+                }
+                // Normalisers of clean windows depend on the row only through `drow`.
+                if drow.to_bits() != dconst_for.to_bits() {
+                    dconst_for = drow;
+                    for (c, slot) in dconst.iter_mut().take(w).enumerate() {
+                        let (lo, hi) = (c.saturating_sub(rad), (c + rad).min(w - 1));
+                        let mut dv = 0.0f32;
+                        for wd in wfull.get(lo + rad - c..=hi + rad - c).into_iter().flatten() {
+                            dv += wd * drow;
+                        }
+                        *slot = dv;
                     }
                 }
                 for (c, (slot, &centre)) in
@@ -256,16 +376,37 @@ pub fn slope_into_binned_smoothed<'b, const CAP: usize>(
                     *slot = if centre.is_nan() {
                         centre
                     } else {
-                        let lo = c.saturating_sub(rad);
-                        let hi = (c + rad).min(w - 1);
-                        let (mut nv, mut dv) = (0.0f32, 0.0f32);
-                        let taps = num.get(lo..=hi).into_iter().flatten();
-                        let dtaps = den.get(lo..=hi).into_iter().flatten();
-                        for (j, (&a, &b)) in taps.zip(dtaps).enumerate() {
-                            let wd = wt.get((lo + j).abs_diff(c)).copied().unwrap_or(0.0);
-                            nv += wd * a;
-                            dv += wd * b;
+                        let (lo, hi) = (c.saturating_sub(rad), (c + rad).min(w - 1));
+                        let ws = wfull.get(lo + rad - c..=hi + rad - c).unwrap_or(&[]);
+                        let taps = num.get(lo..=hi).unwrap_or(&[]);
+                        // Four terms a step (fewer loop instructions), still one running sum
+                        // in index order.
+                        let (w4, wrest) = ws.as_chunks::<4>();
+                        let (t4, trest) = taps.as_chunks::<4>();
+                        let mut nv = 0.0f32;
+                        for ([w0, w1, w2, w3], [t0, t1, t2, t3]) in w4.iter().zip(t4) {
+                            nv += w0 * t0;
+                            nv += w1 * t1;
+                            nv += w2 * t2;
+                            nv += w3 * t3;
                         }
+                        for (&wd, &a) in wrest.iter().zip(trest) {
+                            nv += wd * a;
+                        }
+                        let before = match lo {
+                            0 => 0,
+                            _ => nbad.get(lo - 1).copied().unwrap_or(0),
+                        };
+                        let clean = nbad.get(hi).copied().unwrap_or(u32::MAX) == before;
+                        let dv = if clean {
+                            dconst.get(c).copied().unwrap_or(0.0)
+                        } else {
+                            let mut dv = 0.0f32;
+                            for (&wd, &b) in ws.iter().zip(den.get(lo..=hi).unwrap_or(&[])) {
+                                dv += wd * b;
+                            }
+                            dv
+                        };
                         if dv > 0.0 { nv / dv } else { f32::NAN }
                     };
                 }
@@ -277,23 +418,30 @@ pub fn slope_into_binned_smoothed<'b, const CAP: usize>(
             continue;
         }
         let sr = srow as usize;
-        for c in 0..w {
-            let v = if sr == 0 || c == 0 || sr + 1 >= h || c + 1 >= w {
-                SLOPE_NODATA
-            } else {
-                let z = |dc: usize, dr: usize| {
-                    let v = get(
-                        &smo,
-                        3,
-                        srow + dr as isize - 1,
-                        c as isize + dc as isize - 1,
-                    );
-                    (!v.is_nan()).then_some(v)
-                };
-                horn(&z, 1, 1, inv8).map_or(SLOPE_NODATA, slope_from_deg)
+        // The three smoothed rows around S, looked up once per row; interior pixels read their
+        // 3 × 3 neighbourhoods as windows of them.
+        let rows3 = (
+            smo.get((sr + 2) % 3).and_then(|r| r.get(..w)),
+            smo.get(sr % 3).and_then(|r| r.get(..w)),
+            smo.get((sr + 1) % 3).and_then(|r| r.get(..w)),
+        );
+        let Some(dst) = out.get_mut(sr * w..sr * w + w) else {
+            continue;
+        };
+        dst.fill(SLOPE_NODATA);
+        let (Some(up), Some(mid), Some(dn)) = rows3 else {
+            continue;
+        };
+        if sr == 0 || sr + 1 >= h {
+            continue;
+        }
+        let windows = up.windows(3).zip(mid.windows(3)).zip(dn.windows(3));
+        for (o, ((u, m), d)) in dst.iter_mut().skip(1).zip(windows) {
+            let (&[a, b, c], &[dd, e, f], &[g, hh, i]) = (u, m, d) else {
+                continue;
             };
-            if let Some(o) = out.get_mut(sr * w + c) {
-                *o = v;
+            if [a, b, c, dd, e, f, g, hh, i].iter().all(|v| !v.is_nan()) {
+                *o = slope_from_deg(horn_deg([a, b, c, dd, f, g, hh, i], inv8));
             }
         }
     }
@@ -378,12 +526,18 @@ fn horn(
     let (g, hh, i) = (z(0, 2)?, z(1, 2)?, z(2, 2)?);
     // Centre height is not used by Horn's operator but a masked centre must still mask the pixel.
     z(1, 1)?;
+    Some(horn_deg([a, b, c, d, f, g, hh, i], inv8))
+}
+
+/// Horn's slope in degrees from the eight neighbours `[a, b, c, d, f, g, h, i]` (rows top to
+/// bottom, left to right, centre left out) and `1 / (8 · pixel)`.
+#[inline(always)]
+fn horn_deg([a, b, c, d, f, g, hh, i]: [f32; 8], inv8: f32) -> f32 {
     let dzdx = ((c + 2.0 * f + i) - (a + 2.0 * d + g)) * inv8;
     let dzdy = ((g + 2.0 * hh + i) - (a + 2.0 * b + c)) * inv8;
     let grad = libm::sqrtf(dzdx * dzdx + dzdy * dzdy);
-    let deg = libm::atanf(grad) * DEG_PER_RAD;
     // Overflowing gradients (huge heights) give +inf → atan = 90°, still a valid slope; NaN masks.
-    Some(deg)
+    libm::atanf(grad) * DEG_PER_RAD
 }
 
 #[cfg(test)]
@@ -556,5 +710,146 @@ mod tests {
         }
         assert!(slope_into_binned_smoothed::<{ N - 1 }>(&dem, 1, 1.0, &mut out, false).is_err());
         assert!(slope_into_binned_smoothed::<N>(&dem, 2, 100.0, &mut out, false).is_ok());
+    }
+
+    /// The plain normalised convolution, summed in the order the streaming code promises:
+    /// per column over the window's rows, then along the row.
+    fn plain_smoothed(z: &[f32], w: usize, h: usize, sigma: f32) -> [f32; 48 * 48] {
+        let (wt, r) = gauss_weights(sigma);
+        let ri = r as isize;
+        let mut out = [f32::NAN; 48 * 48];
+        let mut num = [0.0f32; 48 * 48];
+        let mut den = [0.0f32; 48 * 48];
+        for g in 0..h as isize {
+            for c in 0..w {
+                let (mut a, mut b) = (0.0f32, 0.0f32);
+                for d in -ri..=ri {
+                    let rr = g + d;
+                    if rr < 0 || rr as usize >= h {
+                        continue;
+                    }
+                    let v = z[rr as usize * w + c];
+                    if !v.is_nan() {
+                        a += wt[d.unsigned_abs()] * v;
+                        b += wt[d.unsigned_abs()];
+                    }
+                }
+                num[g as usize * w + c] = a;
+                den[g as usize * w + c] = b;
+            }
+        }
+        for g in 0..h {
+            for c in 0..w {
+                if z[g * w + c].is_nan() {
+                    continue;
+                }
+                let (lo, hi) = (c.saturating_sub(r), (c + r).min(w - 1));
+                let (mut nv, mut dv) = (0.0f32, 0.0f32);
+                for j in lo..=hi {
+                    nv += wt[j.abs_diff(c)] * num[g * w + j];
+                    dv += wt[j.abs_diff(c)] * den[g * w + j];
+                }
+                out[g * w + c] = if dv > 0.0 { nv / dv } else { f32::NAN };
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn streaming_smoothing_is_the_plain_convolution_bit_for_bit() {
+        const N: usize = 48;
+        let mut state = 0x2545_F491_4F6C_DD1Du64;
+        let mut unit = || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 40) as f32 / (1u64 << 24) as f32
+        };
+        for (case, sigma) in [0.7f32, 1.5, 2.0, 2.5, 3.1, 20.0].into_iter().enumerate() {
+            let mut z = [0.0f32; N * N];
+            for (i, v) in z.iter_mut().enumerate() {
+                let (x, y) = ((i % N) as f32, (i / N) as f32);
+                *v = 30.0 * libm::sinf(0.21 * x + 0.1 * y) + 5.0 * unit() - 1700.0;
+            }
+            // Holes: scattered dropouts, a block, a border run, a whole row (the case index
+            // moves them, so each σ sees its own pattern).
+            for _ in 0..20 + 10 * case {
+                let i = (unit() * (N * N) as f32) as usize % (N * N);
+                z[i] = f32::NAN;
+            }
+            for r in 10 + case..16 + case {
+                for c in 30..37 {
+                    z[r * N + c] = f32::NAN;
+                }
+            }
+            for r in 0..N / 2 {
+                z[r * N + (N - 1 - case)] = f32::NAN;
+            }
+            for c in 0..N {
+                z[(40 - case) * N + c] = f32::NAN;
+            }
+            let reference = plain_smoothed(&z, N, N, sigma);
+            let (mut a, mut b) = ([SLOPE_NODATA; N * N], [SLOPE_NODATA; N * N]);
+            let dem = DemPatch::new_checked(&z, N, N, 10.0).unwrap();
+            let fast = slope_into_binned_smoothed::<N>(&dem, 1, sigma, &mut a, false).unwrap();
+            let dem_ref = DemPatch::new_checked(&reference, N, N, 10.0).unwrap();
+            let plain = slope_into_binned_smoothed::<N>(&dem_ref, 1, 0.0, &mut b, false).unwrap();
+            let mut valid = 0;
+            for r in 0..N {
+                for c in 0..N {
+                    assert_eq!(fast.get(c, r), plain.get(c, r), "σ {sigma} at ({c}, {r})");
+                    valid += usize::from(slope_is_valid(fast.get(c, r)));
+                }
+            }
+            assert!(valid > N * N / 2, "σ {sigma}: only {valid} valid slopes");
+        }
+    }
+
+    #[test]
+    fn binning_is_the_block_mean_of_valid_heights_bit_for_bit() {
+        const N: usize = 96;
+        let mut z = [0.0f32; N * N];
+        for (i, v) in z.iter_mut().enumerate() {
+            let (x, y) = ((i % N) as f32, (i / N) as f32);
+            *v = 20.0 * libm::sinf(0.13 * x - 0.07 * y) + 0.37 * x + 1734.25;
+            // Dropouts, infinities and the nodata value, some blocks losing most of their cells.
+            match (i * 7919) % 97 {
+                0 | 1 => *v = f32::NAN,
+                2 => *v = f32::INFINITY,
+                3 | 4 => *v = -9999.0,
+                _ => {}
+            }
+        }
+        for k in [2usize, 3] {
+            let (w, h) = (N / k, N / k);
+            let mut binned = [f32::NAN; N * N];
+            for r in 0..h {
+                for c in 0..w {
+                    let (mut sum, mut cnt) = (0.0f32, 0usize);
+                    for j in 0..k {
+                        for i in 0..k {
+                            let v = z[(r * k + j) * N + c * k + i];
+                            if v.is_finite() && v != -9999.0 {
+                                sum += v;
+                                cnt += 1;
+                            }
+                        }
+                    }
+                    if cnt >= (k * k).div_ceil(2) {
+                        binned[r * w + c] = sum / cnt as f32;
+                    }
+                }
+            }
+            let (mut a, mut b) = ([SLOPE_NODATA; N * N], [SLOPE_NODATA; N * N]);
+            let dem = DemPatch::new_checked(&z, N, N, 10.0)
+                .unwrap()
+                .with_nodata(-9999.0);
+            let fast = slope_into_binned_smoothed::<N>(&dem, k, 1.5, &mut a, false).unwrap();
+            let dem_ref = DemPatch::new_checked(&binned[..w * h], w, h, 10.0 * k as f32).unwrap();
+            let plain = slope_into_binned_smoothed::<N>(&dem_ref, 1, 1.5, &mut b, false).unwrap();
+            assert_eq!((fast.width(), fast.height()), (w, h));
+            assert!(fast.pixels().iter().filter(|p| slope_is_valid(**p)).count() > w * h / 2);
+            assert_eq!(fast.pixels(), plain.pixels(), "k = {k}");
+        }
     }
 }

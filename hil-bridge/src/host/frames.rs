@@ -166,13 +166,15 @@ pub struct FrameSet {
     pub frames: Vec<Frame>,
 }
 
-/// Terrain smoothing σ of the HIL tile, metres: `UMBRA_HIL_SMOOTHING_M`, else 0 (see
-/// [`generate_set`]).
+/// Terrain smoothing σ of the HIL tile, metres: that of the tiles the flyer carries (InSAR
+/// tiles, [`ground_sim::reference::INSAR_SMOOTHING_M`], 50 m), so every terrain frame pays for
+/// the Gaussian the navigator applies to match it; `UMBRA_HIL_SMOOTHING_M` overrides it for
+/// measuring (0: no smoothing, the set before session 28).
 pub fn tile_smoothing_m() -> f64 {
     std::env::var("UMBRA_HIL_SMOOTHING_M")
         .ok()
         .and_then(|v| v.parse().ok())
-        .unwrap_or(0.0)
+        .unwrap_or(ground_sim::reference::INSAR_SMOOTHING_M)
 }
 
 /// Deterministic xorshift-multiply generator for the stress frames.
@@ -310,9 +312,8 @@ pub fn generate_set(terrain_frames: usize) -> Result<FrameSet> {
     }
     let patch = nav_core::DemPatch::new_checked(&coarse, t, t, TILE_PIXEL_M as f32)?;
     let mut slope = vec![SLOPE_NODATA; t * t];
-    // No terrain smoothing in the HIL tile yet: with ground-sim's default (40 m) the frames'
-    // Gaussian stage ran bit-exact on the target but took the worst frame from 18.9 M to 25.1 M
-    // instructions, over the 20 M budget; `UMBRA_HIL_SMOOTHING_M` turns it on for measuring.
+    // The flight tiles' smoothing (sessions 1–27 ran this set unsmoothed, which left out the
+    // frames' Gaussian stage: 10 M instructions a frame at 50 m before session 28's rewrite).
     let smoothing_m = tile_smoothing_m();
     let img: SlopeImage<'_> = nav_core::slope::slope_into_binned_smoothed::<1024>(
         &patch,
