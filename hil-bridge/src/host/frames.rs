@@ -45,6 +45,11 @@ pub const ATLAS_FRAMES: usize = 8;
 pub const ATLAS_GENTLE_FRAMES: usize = 2;
 /// Gentle-terrain frames (relief scaled by [`GENTLE_RELIEF`]) sent with a prior.
 pub const GENTLE_FRAMES: usize = 3;
+/// RMS of the correlated height noise of the noisy frames, metres (one per frame).
+pub const NOISY_RMS_M: [f32; 3] = [2.0, 4.0, 8.0];
+/// Correlation length of that noise, frame pixels (three box passes of this radius).
+pub const NOISY_BOX_RADIUS_PX: usize = 2;
+
 /// Height scale of the gentle frames: slopes become about a fifth of the tile's, below the
 /// tile's detector threshold for most blobs.
 pub const GENTLE_RELIEF: f32 = 0.2;
@@ -65,6 +70,11 @@ pub enum FrameKind {
     /// A stress frame sent with a wide prior (σ 8 px, 6°): the area search's worst case after
     /// a feature path that finds nothing.
     StressWithPrior,
+    /// Terrain with correlated height noise (an InSAR DEM's pixel-scale error, [`NOISY_RMS_M`])
+    /// sent with a cruise prior: a full keypoint budget whose matches find no consensus, then
+    /// the area search on the slope the noise leaves readable (the feature path's whole course
+    /// and the search's, in one frame).
+    NoisyWithPrior,
     /// All heights equal: no features.
     Flat,
     /// Uniform random heights: many weak, unmatchable keypoints.
@@ -223,6 +233,49 @@ fn cut(dem: &[f32], cu: f64, cv: f64, heading_rad: f64) -> Vec<f32> {
         }
     }
     out
+}
+
+/// Unit-RMS height noise over an `n × n` frame, correlated over about `radius` pixels: white
+/// noise through three box passes per axis, then scaled to RMS 1.
+fn correlated_noise(rng: &mut Rng, n: usize, radius: usize) -> Vec<f32> {
+    let mut v: Vec<f64> = (0..n * n).map(|_| rng.unit() - 0.5).collect();
+    let r = radius as isize;
+    for _ in 0..3 {
+        for axis in 0..2 {
+            let src = v.clone();
+            for y in 0..n as isize {
+                for x in 0..n as isize {
+                    let mut acc = 0.0;
+                    let mut cnt = 0.0;
+                    for d in -r..=r {
+                        let (xx, yy) = if axis == 0 { (x + d, y) } else { (x, y + d) };
+                        if (0..n as isize).contains(&xx) && (0..n as isize).contains(&yy) {
+                            acc += src[yy as usize * n + xx as usize];
+                            cnt += 1.0;
+                        }
+                    }
+                    v[y as usize * n + x as usize] = acc / cnt;
+                }
+            }
+        }
+    }
+    let rms = (v.iter().map(|e| e * e).sum::<f64>() / v.len() as f64).sqrt();
+    v.iter().map(|e| (e / rms.max(1e-12)) as f32).collect()
+}
+
+/// The prior of a filter in cruise: 50 m and 2° (1σ), drawn off the truth by about 1σ.
+fn cruise_prior(truth: &Truth) -> crate::msg::WirePrior {
+    crate::msg::WirePrior {
+        center_tile_px: [
+            truth.center_tile_px[0] as f32 - 2.0,
+            truth.center_tile_px[1] as f32 + 1.5,
+        ],
+        sigma_px: 2.5,
+        heading_rad: truth.heading_rad as f32 - 0.03,
+        heading_sigma_rad: 0.035,
+        scale: 0.5,
+        scale_sigma: 0.01,
+    }
 }
 
 fn stress(kind: FrameKind, seed: u64) -> Vec<f32> {
@@ -413,18 +466,7 @@ pub fn generate_set(terrain_frames: usize) -> Result<FrameSet> {
             heading_rad: heading,
             scale: FRAME_PIXEL_M as f64 / TILE_PIXEL_M,
         };
-        // The prior of a filter in cruise: 50 m and 2° (1σ), drawn off the truth by about 1σ.
-        let prior = crate::msg::WirePrior {
-            center_tile_px: [
-                truth.center_tile_px[0] as f32 - 2.0,
-                truth.center_tile_px[1] as f32 + 1.5,
-            ],
-            sigma_px: 2.5,
-            heading_rad: heading as f32 - 0.03,
-            heading_sigma_rad: 0.035,
-            scale: 0.5,
-            scale_sigma: 0.01,
-        };
+        let prior = cruise_prior(&truth);
         frames.push(Frame {
             meta: FrameMeta {
                 id: frames.len() as u32,
@@ -438,6 +480,36 @@ pub fn generate_set(terrain_frames: usize) -> Result<FrameSet> {
                 pixel_m: FRAME_PIXEL_M,
                 truth: Some(truth),
                 prior: Some(prior),
+                job: FrameJob::Locate,
+                truth_offset_m: None,
+            },
+            heights_m: heights,
+        });
+    }
+    for (k, &rms) in NOISY_RMS_M.iter().enumerate() {
+        let heading = (20.0 + 125.0 * k as f64).to_radians();
+        let cu = margin + rng.unit() * (TERRAIN_SIDE as f64 - 2.0 * margin);
+        let cv = margin + rng.unit() * (TERRAIN_SIDE as f64 - 2.0 * margin);
+        let mut heights = cut(z, cu, cv, heading);
+        let noise = correlated_noise(&mut rng, FRAME_SIDE, NOISY_BOX_RADIUS_PX);
+        for (h, e) in heights.iter_mut().zip(&noise) {
+            *h += rms * e;
+        }
+        let truth = Truth {
+            center_tile_px: [(cu - 0.5) / 2.0, (cv - 0.5) / 2.0],
+            heading_rad: heading,
+            scale: FRAME_PIXEL_M as f64 / TILE_PIXEL_M,
+        };
+        frames.push(Frame {
+            meta: FrameMeta {
+                id: frames.len() as u32,
+                name: format!("noisy-{k:02}-{rms:.0}m"),
+                kind: FrameKind::NoisyWithPrior,
+                width: FRAME_SIDE as u16,
+                height: FRAME_SIDE as u16,
+                pixel_m: FRAME_PIXEL_M,
+                truth: Some(truth),
+                prior: Some(cruise_prior(&truth)),
                 job: FrameJob::Locate,
                 truth_offset_m: None,
             },
