@@ -210,6 +210,22 @@ fn main() -> Result<()> {
                     report.max_instructions_budgeted
                 ));
             }
+            // The ground's cost model must track the measured counts (campaigns report their
+            // frames' budget overruns with it).
+            let (lo, hi) = ground_sim::flyer::m4_cost::HIL_RATIO_BOUNDS;
+            for f in &report.per_frame {
+                if let Some(e) = f.estimated_instructions {
+                    let ratio = e as f64 / f.instructions.max(1) as f64;
+                    if !(lo..=hi).contains(&ratio) {
+                        failures.push(format!(
+                            "{}: the cost model estimates {e} instructions, measured {} \
+                             (ratio {ratio:.3}, bounds {lo}–{hi}): recalibrate \
+                             ground_sim::flyer::m4_cost",
+                            f.name, f.instructions
+                        ));
+                    }
+                }
+            }
             // The class known to break the budget (issue 15): shown on every run, and held
             // to its ceiling so it cannot grow unnoticed.
             for (name, n) in &report.over_budget_known {

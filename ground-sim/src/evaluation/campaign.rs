@@ -203,7 +203,14 @@ pub fn fly_posed(
         prior.as_ref(),
     )
     .map_err(|e| anyhow!("{e}"))?;
-    Ok(score(nav.tile(), &run, pose, frame.width, frame.height))
+    let mut s = score(nav.tile(), &run, pose, frame.width, frame.height);
+    let k = nav.bin_factor(pose.pixel_m as f32).max(1);
+    s.m4_instructions_est = Some(crate::flyer::m4_cost::estimate(
+        &run.report,
+        (frame.width / k) * (frame.height / k),
+        nav.config(),
+    ));
+    Ok(s)
 }
 
 /// Campaign summary (the JSON of `ground-sim eval`, one row of `suite`).
@@ -259,6 +266,14 @@ pub struct EvalSummary {
     pub refined_nees_mean: f64,
     /// Why fixes were not refined, and how often.
     pub refine_notes: BTreeMap<String, usize>,
+    /// Estimated Cortex-M4 instructions per frame (`flyer::m4_cost`, calibrated on the HIL
+    /// set): 95th percentile over all frames.
+    pub m4_instructions_p95: f64,
+    /// Fraction of all frames whose estimate exceeds the flyer's budget
+    /// (`flyer::m4_cost::FLIGHT_BUDGET`, 20 M): frames that would overrun on the target.
+    pub over_budget_frac: f64,
+    /// The same among the fixes: fixes the flyer could not afford as the navigator runs today.
+    pub fixes_over_budget_frac: f64,
     /// Frame pixel size range, metres.
     pub pixel_range_m: [f64; 2],
     /// Sensor model.
@@ -307,6 +322,11 @@ pub fn summarize(rows: &[TrnScore], spec: &CampaignSpec) -> EvalSummary {
         .iter()
         .filter_map(|r| Some((r.pos_err_m? / r.refined_sigma_m?).powi(2)))
         .collect();
+    let m4: Vec<f64> = rows
+        .iter()
+        .filter_map(|r| r.m4_instructions_est.map(|v| v as f64))
+        .collect();
+    let budget = crate::flyer::m4_cost::FLIGHT_BUDGET as f64;
     let mean = |v: &[f64]| {
         if v.is_empty() {
             f64::NAN
@@ -340,6 +360,13 @@ pub fn summarize(rows: &[TrnScore], spec: &CampaignSpec) -> EvalSummary {
             / fixes.len().max(1) as f64,
         refine_notes,
         refined_nees_mean: mean(&refined_nees),
+        m4_instructions_p95: percentile(&mut m4.clone(), 0.95),
+        over_budget_frac: m4.iter().filter(|&&v| v > budget).count() as f64 / n,
+        fixes_over_budget_frac: fixes
+            .iter()
+            .filter(|r| r.m4_instructions_est.is_some_and(|v| v as f64 > budget))
+            .count() as f64
+            / fixes.len().max(1) as f64,
         pixel_range_m: [spec.pixel_min_m, spec.pixel_max_m],
         sensor: spec.sensor,
     }
@@ -362,6 +389,14 @@ pub fn print_summary(s: &EvalSummary) {
         s.success_rate * 100.0,
         s.false_fix_rate * 100.0,
         s.no_fix_rate * 100.0
+    );
+    println!(
+        "M4 cost     est. p95 {:.1} M instructions; over the {} M budget: {:.1} % of frames, \
+         {:.1} % of fixes (flyer::m4_cost)",
+        s.m4_instructions_p95 / 1e6,
+        crate::flyer::m4_cost::FLIGHT_BUDGET / 1_000_000,
+        s.over_budget_frac * 100.0,
+        s.fixes_over_budget_frac * 100.0
     );
     println!(
         "position    p50 {:.2} m  p95 {:.2} m  max {:.2} m",
@@ -412,7 +447,7 @@ pub fn write_csv_trials(path: &Path, trials: &[usize], rows: &[TrnScore]) -> any
     );
     writeln!(
         csv,
-        "trial,x_m,y_m,heading_deg,pixel_m,fix,false_fix,features,matches,inliers,rotation_deg,heading_err_deg,scale,scale_truth,pos_err_m,err_east_m,err_north_m,center_err_px,reg_err_mean_px,reg_err_max_px,center_sigma_m,nees,heading_sigma_deg,time_ms,refined,ncc,refined_sigma_m,refine_iterations,refine_note,area_search,no_fix_reason"
+        "trial,x_m,y_m,heading_deg,pixel_m,fix,false_fix,features,matches,inliers,rotation_deg,heading_err_deg,scale,scale_truth,pos_err_m,err_east_m,err_north_m,center_err_px,reg_err_mean_px,reg_err_max_px,center_sigma_m,nees,heading_sigma_deg,time_ms,refined,ncc,refined_sigma_m,refine_iterations,refine_note,area_search,m4_instructions_est,no_fix_reason"
     )?;
     let o = |v: Option<f64>| v.map_or(String::new(), |x| format!("{x:.6}"));
     for (i, r) in trials.iter().zip(rows) {
@@ -424,7 +459,7 @@ pub fn write_csv_trials(path: &Path, trials: &[usize], rows: &[TrnScore]) -> any
         });
         writeln!(
             csv,
-            "{i},{:.3},{:.3},{:.4},{:.4},{},{},{},{},{},{},{},{},{:.6},{},{},{},{},{},{},{},{},{},{:.3},{},{},{},{},{},{},{}",
+            "{i},{:.3},{:.3},{:.4},{:.4},{},{},{},{},{},{},{},{},{:.6},{},{},{},{},{},{},{},{},{},{:.3},{},{},{},{},{},{},{},{}",
             t.x_m,
             t.y_m,
             t.heading_rad.to_degrees(),
@@ -454,6 +489,8 @@ pub fn write_csv_trials(path: &Path, trials: &[usize], rows: &[TrnScore]) -> any
             r.refine_iterations.map_or(String::new(), |n| n.to_string()),
             r.refine_note.as_deref().unwrap_or(""),
             r.area_search,
+            r.m4_instructions_est
+                .map_or(String::new(), |v| v.to_string()),
             r.no_fix_reason.as_deref().unwrap_or("")
         )?;
     }

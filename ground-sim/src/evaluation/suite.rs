@@ -682,8 +682,8 @@ pub fn table_markdown(r: &SuiteReport) -> String {
         },
     );
     s += concat!(
-        "| scene | tile | prior | success | false | no fix (reasons) | pos p50 / p95 m | heading p95 ° | in 3σ | NEES | ms/frame | navmap (footprint) go: success / agree | navmap (rehearsal) go: success / agree |\n",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+        "| scene | tile | prior | success | false | no fix (reasons) | pos p50 / p95 m | heading p95 ° | in 3σ | NEES | ms/frame | M4 est. p95 (over 20 M: frames / fixes) | navmap (footprint) go: success / agree | navmap (rehearsal) go: success / agree |\n",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for row in &r.rows {
         let e = &row.summary;
@@ -700,7 +700,7 @@ pub fn table_markdown(r: &SuiteReport) -> String {
             }
         };
         s += &format!(
-            "| {} | {} ({} feat.) | {} | {:.1} % | {} | {:.1} % {} | {} / {} | {} | {} | {} | {:.2} | {} | {} |\n",
+            "| {} | {} ({} feat.) | {} | {:.1} % | {} | {:.1} % {} | {} / {} | {} | {} | {} | {:.2} | {} | {} | {} |\n",
             row.scene,
             row.kind.name(),
             row.tile_features,
@@ -726,6 +726,16 @@ pub fn table_markdown(r: &SuiteReport) -> String {
             },
             f(e.nees_mean, 2),
             e.time_ms_mean,
+            if e.m4_instructions_p95.is_finite() {
+                format!(
+                    "{:.1} M ({:.0} % / {:.0} %)",
+                    e.m4_instructions_p95 / 1e6,
+                    100.0 * e.over_budget_frac,
+                    100.0 * e.fixes_over_budget_frac
+                )
+            } else {
+                "–".into()
+            },
             go_cell(Some(&row.navmap)),
             go_cell(row.rehearsal.as_ref()),
         );

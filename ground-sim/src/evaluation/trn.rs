@@ -55,6 +55,9 @@ pub struct TrnScore {
     /// Gauss–Newton updates the applied refinement made (`Refined::iterations`).
     #[serde(default)]
     pub refine_iterations: Option<u8>,
+    /// Estimated Cortex-M4 instructions of the frame (`flyer::m4_cost`); campaigns fill it.
+    #[serde(default)]
+    pub m4_instructions_est: Option<u64>,
     /// Estimated rotation, degrees.
     #[serde(with = "crate::evaluation::shard::opt_f64")]
     pub rotation_deg: Option<f64>,

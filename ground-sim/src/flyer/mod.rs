@@ -2,4 +2,5 @@
 //! ([`frames`]) and nav-core's flight code run on them in-process ([`onboard`]).
 
 pub mod frames;
+pub mod m4_cost;
 pub mod onboard;

@@ -128,6 +128,9 @@ pub struct FrameRecord {
     pub atlas_tile: Option<u16>,
     /// Atlas frames: tiles located on.
     pub atlas_tried: Option<u8>,
+    /// TRN frames on the tile: the ground's cost model's estimate of this frame's
+    /// instructions (`ground_sim::flyer::m4_cost`), to compare with `instructions`.
+    pub estimated_instructions: Option<u64>,
     /// A frame of the class known to break the instruction budget
     /// ([`KNOWN_OVER_BUDGET_CEILING`]).
     pub known_over_budget: bool,
@@ -381,10 +384,34 @@ pub fn host_result(
     fp: &mut FinalPhase,
     f: &Frame,
 ) -> FrameResult {
+    host_result_estimated(nav, atlas, ws, fp, f).0
+}
+
+/// [`host_result`] with, for a TRN frame on the tile, the ground's estimate of its Cortex-M4
+/// instructions ([`ground_sim::flyer::m4_cost::estimate`]) from the host's own report.
+pub fn host_result_estimated(
+    nav: &Navigator<'_>,
+    atlas: Option<&Atlas<'_>>,
+    ws: &mut Workspace,
+    fp: &mut FinalPhase,
+    f: &Frame,
+) -> (FrameResult, Option<u64>) {
     let payload: Vec<u8> = f.heights_m.iter().flat_map(|h| h.to_le_bytes()).collect();
     let header = frame_header(f, &payload);
     let out = crate::job::execute(nav, atlas, ws, fp, &header, &f.heights_m);
-    convert::job_result(f.meta.id, &out, fp)
+    let estimate = match &out {
+        crate::job::JobOutput::Locate(Ok(report)) => {
+            let k = nav.bin_factor(f.meta.pixel_m).max(1);
+            let binned = (f.meta.width as usize / k) * (f.meta.height as usize / k);
+            Some(ground_sim::flyer::m4_cost::estimate(
+                report,
+                binned,
+                nav.config(),
+            ))
+        }
+        _ => None,
+    };
+    (convert::job_result(f.meta.id, &out, fp), estimate)
 }
 
 fn outcome_name(o: &WireOutcome) -> String {
@@ -689,7 +716,8 @@ pub fn run(opts: &RunOptions) -> Result<Report> {
             _ => bail!("frame {id}: no cost"),
         };
         costs.push((id, cost));
-        let host = host_result(&nav, Some(&atlas), &mut ws, &mut fp, f);
+        let (host, estimated_instructions) =
+            host_result_estimated(&nav, Some(&atlas), &mut ws, &mut fp, f);
         let bit_exact = postcard::to_stdvec(&host)? == postcard::to_stdvec(&got)?;
         let (pos_err, head_err) = match (&got.outcome, &f.meta.truth) {
             (WireOutcome::Fix(fx), Some(t)) => {
@@ -760,6 +788,7 @@ pub fn run(opts: &RunOptions) -> Result<Report> {
             atlas_tile: got.atlas.map(|a| a.tile),
             atlas_tried: got.atlas.map(|a| a.tried),
             known_over_budget: f.meta.kind == super::frames::FrameKind::NoisyWithPrior,
+            estimated_instructions,
         });
         let mut extra = String::new();
         if let Some(a) = got.atlas {

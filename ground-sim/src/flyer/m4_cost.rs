@@ -1,0 +1,90 @@
+//! Estimated Cortex-M4 instructions of one TRN frame (`Navigator::locate_dem`), from what its
+//! report says the navigator did. Ground campaigns run nav-core on the host, where time says
+//! little about the flyer; this model says which of their frames would overrun the flyer's
+//! per-frame budget. Its constants come from HIL profiles under QEMU (the TCG plugin's
+//! per-block counts, session 28: 200 × 200 frames binned to 100 × 100, 50 m smoothing), and
+//! every HIL run compares it with the measured count of each TRN frame (`hil-bridge`, the
+//! `estimated_instructions` of its report), so a change of nav-core's costs that the model
+//! misses shows there.
+//!
+//! Upper-leaning where the report does not say: a search that failed is charged its whole
+//! coarse lattice and fine level, a refinement that failed its every pass.
+
+use nav_core::refine::RefineError;
+use nav_core::{FrameReport, NavConfig, SearchError};
+
+/// The flyer's budget per frame, instructions (issue 15; asserted by the HIL run).
+pub const FLIGHT_BUDGET: u64 = 20_000_000;
+/// Slope, 50 m smoothing and detection, per binned frame pixel, for a frame with relief (10.93
+/// M for a featureless 100 × 100 binned frame, about 1.2 M more where the detector finds
+/// maxima to examine).
+pub const PER_BINNED_PX: u64 = 1_220;
+/// Per frame keypoint kept: its sub-pixel refinement in the detector, orientation, descriptor
+/// and matching (16 keypoints against 1 on the same frame class: +3.3 M; 0.24 M fits the
+/// set's terrain frames).
+pub const PER_KEYPOINT: u64 = 240_000;
+/// Bounds of estimate / measured that every HIL TRN frame on the tile must meet (session 28:
+/// 0.94–1.16 over 31 frames; the featureless stress frames are overestimated).
+pub const HIL_RATIO_BOUNDS: (f64, f64) = (0.90, 1.20);
+/// MSAC per sample drawn (the minimal solve, `f64`, software on the M4).
+pub const MSAC_PER_SAMPLE: u64 = 700;
+/// MSAC per correspondence scored (`f32`).
+pub const MSAC_PER_POINT: u64 = 30;
+/// Area search per coarse lattice cell (49 samples, ≈ 28 instructions each).
+pub const SEARCH_PER_COARSE_CELL: u64 = 1_400;
+/// Area search: fine level of the winner and the runners, climbs and valley paths.
+pub const SEARCH_FINE: u64 = 2_300_000;
+/// Dense refinement per sample and pass (the pass' sums, its `f64` row flushes and normal
+/// equations: 0.57 M a pass of 800 samples).
+pub const REFINE_PER_SAMPLE_PASS: u64 = 715;
+
+/// Estimated instructions of the frame `report` came from, `binned_px` binned frame pixels,
+/// under `cfg` (the navigator's configuration: the refinements' caps).
+pub fn estimate(report: &FrameReport, binned_px: usize, cfg: &NavConfig) -> u64 {
+    let mut n = PER_BINNED_PX * binned_px as u64 + PER_KEYPOINT * report.features as u64;
+    // MSAC: what it drew, or, where it gave nothing back, what matches that agree on nothing
+    // cost it (the adaptive stop at a best consensus of 2 of n, within the sample cap).
+    let m = report.matches as u64;
+    if m >= 3 {
+        let samples = if report.msac_iterations > 0 {
+            report.msac_iterations as u64
+        } else {
+            let w = 2.0 / m as f64;
+            let need = (1.0 - cfg.msac.confidence as f64).ln() / (1.0 - w * w).ln();
+            (need.ceil().max(1.0) as u64).min(cfg.msac.max_iterations as u64)
+        };
+        n += samples * (MSAC_PER_SAMPLE + MSAC_PER_POINT * m);
+    }
+    let full_lattice = (nav_core::search::MAX_OFFSETS.pow(2)
+        * nav_core::search::MAX_HEADINGS
+        * nav_core::search::MAX_SCALES) as u64;
+    let from_search = matches!(report.search, Some(Ok(_)));
+    n += match &report.search {
+        None => 0,
+        Some(Ok(hit)) => SEARCH_PER_COARSE_CELL * hit.coarse_cells as u64 + SEARCH_FINE,
+        Some(Err(
+            SearchError::Disabled
+            | SearchError::NoRaster
+            | SearchError::PriorTooWide
+            | SearchError::FlatFrame,
+        )) => 0,
+        Some(Err(_)) => SEARCH_PER_COARSE_CELL * full_lattice + SEARCH_FINE,
+    };
+    let (iters, samples) = if from_search {
+        (
+            cfg.search.refine_max_iterations,
+            cfg.search.refine_max_samples,
+        )
+    } else {
+        (cfg.refine.max_iterations, cfg.refine.max_samples)
+    };
+    let passes_samples = match &report.refine {
+        None => 0,
+        Some(Ok(r)) => (r.iterations as u64 + 1) * r.samples as u64,
+        Some(Err(RefineError::NotConverged)) => {
+            (iters.min(nav_core::refine::MAX_ITERATIONS) as u64 + 1) * samples as u64
+        }
+        Some(Err(_)) => samples as u64,
+    };
+    n + REFINE_PER_SAMPLE_PASS * passes_samples
+}
