@@ -30,8 +30,9 @@ pub const FRAME_PIXEL_M: f32 = 10.0;
 pub const TERRAIN_SIDE: usize = 600;
 /// Tile ground sample distance, metres.
 pub const TILE_PIXEL_M: f64 = 20.0;
-/// Format version of `frames.bin` (bumped on any change of its layout).
-pub const FRAMES_FORMAT_VERSION: u32 = 3;
+/// Format version of the recorded set (bumped on any change of `frames.bin`'s layout or of the
+/// frames the generator makes, so that a set on disk is regenerated; 4: the noisy frames).
+pub const FRAMES_FORMAT_VERSION: u32 = 4;
 /// Terrain seed.
 pub const TERRAIN_SEED: u64 = 8;
 /// Core side of the HIL atlas's tiles, tile pixels (the 300 px map in 2 × 2 tiles).
