@@ -74,6 +74,16 @@ pub struct NavConfig {
     pub refine: RefineConfig,
     /// Prior-aided area search when the feature path gives no fix ([`crate::search`]).
     pub search: SearchConfig,
+    /// With a prior, run the area search first on a DEM frame's slope alone ([`Self::locate_dem`];
+    /// the atlas and slope-image paths keep the feature path first), and detect and
+    /// match features only when it gives no fix (without searching again). A frame the
+    /// search fixes then skips detection, descriptors and matching (≈ 6–9 M Cortex-M4
+    /// instructions of a 200 × 200 frame, docs/bounds.md); one it does not pays for the search
+    /// before its feature path. Without it, the search runs only after the feature path
+    /// failed, and a search fix after a full keypoint budget overran the flyer's 20 M budget
+    /// (session 28; with it, on the terrain suite's 36 campaigns with a prior, success the same
+    /// or higher, no false fix, docs/registration.md).
+    pub search_first: bool,
 }
 
 impl Default for NavConfig {
@@ -91,6 +101,7 @@ impl Default for NavConfig {
             match_tile_smoothing: true,
             refine: RefineConfig::default(),
             search: SearchConfig::default(),
+            search_first: true,
         }
     }
 }
@@ -147,6 +158,9 @@ pub struct FrameReport {
     pub match_stats: MatchStats,
     /// Detector counters for the frame.
     pub detect_stats: crate::detector::DetectStats,
+    /// Whether SURF ran on the frame: false when the area search, run first
+    /// ([`NavConfig::search_first`]), fixed it.
+    pub detected: bool,
     /// The dense refinement of the fix: `None` when there was no feature fix to refine,
     /// otherwise what it gave or why it was not applied (the fix then stands unrefined).
     pub refine: Option<Result<Refined, RefineError>>,
@@ -307,8 +321,86 @@ impl<'t> Navigator<'t> {
         prior: Option<&Prior>,
     ) -> Result<FrameReport, NavError> {
         let k = self.bin_factor(dem.pixel_m());
+        if self.cfg.search_first
+            && self.cfg.search.enabled
+            && prior.is_some()
+            && self.tile.slope_raster().is_some()
+        {
+            let (w, h) = (dem.width(), dem.height());
+            self.slope_dem(ws, dem, k)?;
+            let img = ws.slope.image()?;
+            let info = self.frame_info(&img, k, true);
+            let mut first = FrameReport {
+                outcome: Err(NoFix::TooFewFeatures),
+                features: 0,
+                features_dropped: 0,
+                matches: 0,
+                inliers: 0,
+                msac_iterations: 0,
+                affine: None,
+                match_stats: MatchStats::default(),
+                detect_stats: crate::detector::DetectStats::default(),
+                detected: false,
+                refine: None,
+                needed_confirmation: false,
+                search: None,
+            };
+            self.area_search(&mut first, &img, k, &info, (w, h), prior);
+            if first.outcome.is_ok() {
+                ws.features.clear();
+                ws.matches.clear();
+                ws.inlier.fill(false);
+                return Ok(first);
+            }
+            self.features_of_slope(ws, k)?;
+            let mut report = self.locate_extracted_dem(ws, w, h, k, prior, false)?;
+            // The search's verdict stays in the report (it ran, and why it gave nothing).
+            report.search = first.search;
+            if report.refine.is_none() {
+                report.refine = first.refine;
+            }
+            return Ok(report);
+        }
         self.extract_dem(ws, dem, k)?;
         self.locate_extracted_dem(ws, dem.width(), dem.height(), k, prior, true)
+    }
+
+    /// The frame's slope alone (binned by `k`, smoothed as the tile says) into `ws`.
+    fn slope_dem<const P: usize, const W: usize, const K: usize, const M: usize>(
+        &self,
+        ws: &mut NavWorkspace<P, W, K, M>,
+        dem: &DemPatch<'_>,
+        k: usize,
+    ) -> Result<(), NavError> {
+        let sigma_px = self.frame_smoothing_px(dem.pixel_m() * k as f32);
+        if k > 1 || sigma_px > 0.0 {
+            ws.slope
+                .compute_binned_smoothed::<W>(dem, k, sigma_px, self.cfg.fill_dropouts)?;
+        } else if self.cfg.fill_dropouts {
+            ws.slope.compute_from_filled(dem)?;
+        } else {
+            ws.slope.compute_from(dem)?;
+        }
+        Ok(())
+    }
+
+    /// SURF on the slope already in `ws` (binned by `k`), features in frame pixels.
+    fn features_of_slope<const P: usize, const W: usize, const K: usize, const M: usize>(
+        &self,
+        ws: &mut NavWorkspace<P, W, K, M>,
+        k: usize,
+    ) -> Result<(), NavError> {
+        let NavWorkspace {
+            slope,
+            surf,
+            features,
+            ..
+        } = ws;
+        let img = slope.image()?;
+        let cfg = self.frame_surf_config(img.pixel_m());
+        extract(&img, &cfg, surf.scratch(), features)?;
+        features.unbin(k);
+        Ok(())
     }
 
     /// The first half of [`Self::locate_dem`]: the frame's slope (binned by `k`, smoothed as
@@ -645,6 +737,7 @@ impl<'t> Navigator<'t> {
             affine: None,
             match_stats: MatchStats::default(),
             detect_stats: ws.features.stats,
+            detected: true,
             refine: None,
             needed_confirmation: false,
             search: None,

@@ -92,6 +92,12 @@ impl<const N: usize> Features<N> {
             },
         }
     }
+    /// Empty the set (no features, counters zero), in place.
+    pub fn clear(&mut self) {
+        self.features.clear();
+        self.dropped = 0;
+        self.stats = DetectStats::default();
+    }
     /// The features, strongest first (see [`Keypoint::rank_cmp`]).
     pub fn as_slice(&self) -> &[Feature] {
         &self.features

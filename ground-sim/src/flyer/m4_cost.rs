@@ -19,6 +19,9 @@ pub const FLIGHT_BUDGET: u64 = 20_000_000;
 /// M for a featureless 100 × 100 binned frame, about 1.2 M more where the detector finds
 /// maxima to examine).
 pub const PER_BINNED_PX: u64 = 1_220;
+/// Binning, 50 m smoothing and slope alone, per binned frame pixel: a frame the area search
+/// fixed before any detection (`FrameReport::detected` false; 5.35 M for 100 × 100).
+pub const SLOPE_PER_BINNED_PX: u64 = 560;
 /// Per frame keypoint kept: its sub-pixel refinement in the detector, orientation, descriptor
 /// and matching (16 keypoints against 1 on the same frame class: +3.3 M; 0.24 M fits the
 /// set's terrain frames).
@@ -41,7 +44,12 @@ pub const REFINE_PER_SAMPLE_PASS: u64 = 715;
 /// Estimated instructions of the frame `report` came from, `binned_px` binned frame pixels,
 /// under `cfg` (the navigator's configuration: the refinements' caps).
 pub fn estimate(report: &FrameReport, binned_px: usize, cfg: &NavConfig) -> u64 {
-    let mut n = PER_BINNED_PX * binned_px as u64 + PER_KEYPOINT * report.features as u64;
+    let per_px = if report.detected {
+        PER_BINNED_PX
+    } else {
+        SLOPE_PER_BINNED_PX
+    };
+    let mut n = per_px * binned_px as u64 + PER_KEYPOINT * report.features as u64;
     // MSAC: what it drew, or, where it gave nothing back, what matches that agree on nothing
     // cost it (the adaptive stop at a best consensus of 2 of n, within the sample cap).
     let m = report.matches as u64;

@@ -24,12 +24,6 @@ use std::time::{Duration, Instant};
 
 /// The bound on instructions per 200 × 200 frame.
 pub const INSTRUCTION_BUDGET: u64 = 20_000_000;
-/// Ceiling of the frames known to break [`INSTRUCTION_BUDGET`] (kind
-/// [`super::frames::FrameKind::NoisyWithPrior`]: a full keypoint budget whose features fail,
-/// then the area search and its refinement; 27.9 M measured in session 28). They are in the set
-/// so every run shows the overrun; this ceiling catches them growing. Not a budget: the issue's
-/// bound stays 20 M, and these frames break it (docs/bounds.md).
-pub const KNOWN_OVER_BUDGET_CEILING: u64 = 28_500_000;
 /// The bound on static RAM, bytes.
 pub const STATIC_RAM_BUDGET: u64 = 512 * 1024;
 
@@ -131,9 +125,6 @@ pub struct FrameRecord {
     /// TRN frames on the tile: the ground's cost model's estimate of this frame's
     /// instructions (`ground_sim::flyer::m4_cost`), to compare with `instructions`.
     pub estimated_instructions: Option<u64>,
-    /// A frame of the class known to break the instruction budget
-    /// ([`KNOWN_OVER_BUDGET_CEILING`]).
-    pub known_over_budget: bool,
 }
 
 /// The run's report (written as JSON).
@@ -145,13 +136,8 @@ pub struct Report {
     pub fixes: usize,
     /// Frames whose target result equals the host's bit for bit.
     pub bit_exact_frames: usize,
-    /// Worst-case instructions per frame, over every frame.
+    /// Worst-case instructions per frame.
     pub max_instructions_per_frame: u64,
-    /// Worst case over the frames the budget is asserted on (all but the known over-budget
-    /// class).
-    pub max_instructions_budgeted: u64,
-    /// The known over-budget frames: name and instructions.
-    pub over_budget_known: Vec<(String, u64)>,
     /// Mean instructions per frame.
     pub mean_instructions_per_frame: f64,
     /// The bound asserted, instructions per frame.
@@ -787,7 +773,6 @@ pub fn run(opts: &RunOptions) -> Result<Report> {
             site_from_target_m,
             atlas_tile: got.atlas.map(|a| a.tile),
             atlas_tried: got.atlas.map(|a| a.tried),
-            known_over_budget: f.meta.kind == super::frames::FrameKind::NoisyWithPrior,
             estimated_instructions,
         });
         let mut extra = String::new();
@@ -875,17 +860,6 @@ pub fn run(opts: &RunOptions) -> Result<Report> {
 
     let n = records.len();
     let max = records.iter().map(|r| r.instructions).max().unwrap_or(0);
-    let max_budgeted = records
-        .iter()
-        .filter(|r| !r.known_over_budget)
-        .map(|r| r.instructions)
-        .max()
-        .unwrap_or(0);
-    let over_budget_known = records
-        .iter()
-        .filter(|r| r.known_over_budget)
-        .map(|r| (r.name.clone(), r.instructions))
-        .collect();
     let mean = if n > 0 {
         records.iter().map(|r| r.instructions as f64).sum::<f64>() / n as f64
     } else {
@@ -896,8 +870,6 @@ pub fn run(opts: &RunOptions) -> Result<Report> {
         fixes: records.iter().filter(|r| r.outcome == "fix").count(),
         bit_exact_frames: records.iter().filter(|r| r.bit_exact).count(),
         max_instructions_per_frame: max,
-        max_instructions_budgeted: max_budgeted,
-        over_budget_known,
         mean_instructions_per_frame: mean,
         instruction_budget: INSTRUCTION_BUDGET,
         static_ram_bytes: facts.static_ram,
@@ -920,13 +892,11 @@ pub fn run(opts: &RunOptions) -> Result<Report> {
     say(
         opts.progress,
         format!(
-            "{} frames, {} fixes, {} bit-exact; instructions/frame max {} ({} over the budgeted frames; {} frames of the known over-budget class) mean {:.0}; static RAM {} B, flash {} B; {} link faults recovered; {:.1} s",
+            "{} frames, {} fixes, {} bit-exact; instructions/frame max {} mean {:.0}; static RAM {} B, flash {} B; {} link faults recovered; {:.1} s",
             report.frames,
             report.fixes,
             report.bit_exact_frames,
             report.max_instructions_per_frame,
-            report.max_instructions_budgeted,
-            report.over_budget_known.len(),
             report.mean_instructions_per_frame,
             report.static_ram_bytes,
             report.flash_bytes,
