@@ -19,7 +19,7 @@ fn the_search_goes_first_with_a_prior_and_the_features_follow_when_it_fails() {
             .find(|f| f.meta.name.starts_with(name))
             .unwrap_or_else(|| panic!("no frame {name}"))
     };
-    let first = Navigator::new(tile.clone(), NavConfig::default());
+    let first = Navigator::new(tile, NavConfig::default());
     let after = Navigator::new(
         tile,
         NavConfig {
