@@ -871,7 +871,8 @@ impl AtlasNavigator {
     /// A frame's work is one extraction, the feature paths, and at most one expensive stage (one
     /// consensus's refinement, or the area search, never both neighbours and the search), as on
     /// a single tile; the extra is the cheap failures' matching and consensus (docs/bounds.md).
-    /// A frame that needs one tile only gives bit for bit what [`Navigator::locate_dem`] gives.
+    /// A frame that needs one tile only gives bit for bit what [`Navigator::locate_dem`] gives
+    /// with [`crate::NavConfig::search_first`] off: the atlas keeps the feature path first.
     /// Afterwards the workspace's matches and inlier flags are those of the last tile tried
     /// (which may not be the tile of the returned report).
     pub fn locate_dem<

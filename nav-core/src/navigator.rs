@@ -106,6 +106,17 @@ impl Default for NavConfig {
     }
 }
 
+/// Upper bound of the samples × passes a refinement under `cfg` ran, from its result: exact
+/// when it converged, the caps when it was refused, nothing when it could not start.
+fn refine_work(result: &Result<Refined, RefineError>, cfg: &RefineConfig) -> u32 {
+    match result {
+        Ok(r) => (r.iterations as u32 + 1).saturating_mul(r.samples),
+        Err(RefineError::NoRaster | RefineError::Disabled) => 0,
+        Err(_) => (cfg.max_iterations.min(crate::refine::MAX_ITERATIONS) as u32 + 1)
+            .saturating_mul(cfg.max_samples),
+    }
+}
+
 /// Errors that are not "no fix": the frame or configuration itself is unusable.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -161,6 +172,14 @@ pub struct FrameReport {
     /// Whether SURF ran on the frame: false when the area search, run first
     /// ([`NavConfig::search_first`]), fixed it.
     pub detected: bool,
+    /// The area search ran before detection ([`NavConfig::search_first`] with a prior): a frame
+    /// still without a fix then went through the feature path after it, whose verdict is the
+    /// outcome (and `search` keeps the search's).
+    pub search_first: bool,
+    /// The dense refinements' work in this frame, samples × passes summed over every
+    /// refinement run (a search hit's and a feature fix's): exact for one that converged, its
+    /// sample cap times its pass cap for one refused (the error does not say how far it went).
+    pub refine_sample_passes: u32,
     /// The dense refinement of the fix: `None` when there was no feature fix to refine,
     /// otherwise what it gave or why it was not applied (the fix then stands unrefined).
     pub refine: Option<Result<Refined, RefineError>>,
@@ -341,6 +360,8 @@ impl<'t> Navigator<'t> {
                 match_stats: MatchStats::default(),
                 detect_stats: crate::detector::DetectStats::default(),
                 detected: false,
+                search_first: true,
+                refine_sample_passes: 0,
                 refine: None,
                 needed_confirmation: false,
                 search: None,
@@ -356,6 +377,10 @@ impl<'t> Navigator<'t> {
             let mut report = self.locate_extracted_dem(ws, w, h, k, prior, false)?;
             // The search's verdict stays in the report (it ran, and why it gave nothing).
             report.search = first.search;
+            report.search_first = true;
+            report.refine_sample_passes = report
+                .refine_sample_passes
+                .saturating_add(first.refine_sample_passes);
             if report.refine.is_none() {
                 report.refine = first.refine;
             }
@@ -559,6 +584,12 @@ impl<'t> Navigator<'t> {
             None => Err(RefineError::Disabled),
             Some(raster) => refine(img, k, raster, &fix.affine, info, &self.cfg.refine),
         };
+        report.refine_sample_passes = report
+            .refine_sample_passes
+            .saturating_add(refine_work(&result, &self.cfg.refine));
+        let Ok(fix) = &mut report.outcome else {
+            return;
+        };
         if let Ok(r) = &result {
             *fix = fix.with_refinement(r, self.tile.header(), frame_w, frame_h);
         }
@@ -608,7 +639,11 @@ impl<'t> Navigator<'t> {
             ..self.cfg.refine
         };
         // A refused hit leaves the refinement's verdict in the report (why no fix).
-        let r = match refine(img, k, raster, &hit.affine, info, &rcfg) {
+        let result = refine(img, k, raster, &hit.affine, info, &rcfg);
+        report.refine_sample_passes = report
+            .refine_sample_passes
+            .saturating_add(refine_work(&result, &rcfg));
+        let r = match result {
             Ok(r) if r.ncc_after >= self.cfg.search.confirm_min_ncc => r,
             Ok(_) => {
                 report.refine = Some(Err(RefineError::WorseCorrelation));
@@ -738,6 +773,8 @@ impl<'t> Navigator<'t> {
             match_stats: MatchStats::default(),
             detect_stats: ws.features.stats,
             detected: true,
+            search_first: false,
+            refine_sample_passes: 0,
             refine: None,
             needed_confirmation: false,
             search: None,

@@ -137,6 +137,12 @@ pub fn score(
     let mut s = TrnScore {
         fix: run.report.outcome.is_ok(),
         no_fix_reason: run.report.outcome.err().map(|e| match run.report.search {
+            // The search ran first and the feature path after it: the features' verdict is
+            // the outcome, the search's why it did not settle the frame.
+            Some(Err(se)) if run.report.search_first => format!("{e} (area search first: {se})"),
+            Some(Ok(_)) if run.report.search_first => {
+                format!("{e} (area search first: a hit its refinement or a gate refused)")
+            }
             // The search ran after the feature path failed: its verdict is the last word.
             Some(Err(se)) => format!("area search: {se}"),
             Some(Ok(_)) => match &run.report.refine {

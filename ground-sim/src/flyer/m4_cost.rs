@@ -8,9 +8,9 @@
 //! misses shows there.
 //!
 //! Upper-leaning where the report does not say: a search that failed is charged its whole
-//! coarse lattice and fine level, a refinement that failed its every pass.
+//! coarse lattice and (unless no cell had enough valid reference) its fine level, a refused
+//! refinement its sample cap times its pass cap (`FrameReport::refine_sample_passes`).
 
-use nav_core::refine::RefineError;
 use nav_core::{FrameReport, NavConfig, SearchError};
 
 /// The flyer's budget per frame, instructions (issue 15; asserted by the HIL run).
@@ -42,7 +42,7 @@ pub const SEARCH_FINE: u64 = 2_300_000;
 pub const REFINE_PER_SAMPLE_PASS: u64 = 715;
 
 /// Estimated instructions of the frame `report` came from, `binned_px` binned frame pixels,
-/// under `cfg` (the navigator's configuration: the refinements' caps).
+/// under `cfg` (the navigator's configuration: MSAC's confidence and sample cap).
 pub fn estimate(report: &FrameReport, binned_px: usize, cfg: &NavConfig) -> u64 {
     let per_px = if report.detected {
         PER_BINNED_PX
@@ -66,7 +66,6 @@ pub fn estimate(report: &FrameReport, binned_px: usize, cfg: &NavConfig) -> u64 
     let full_lattice = (nav_core::search::MAX_OFFSETS.pow(2)
         * nav_core::search::MAX_HEADINGS
         * nav_core::search::MAX_SCALES) as u64;
-    let from_search = matches!(report.search, Some(Ok(_)));
     n += match &report.search {
         None => 0,
         Some(Ok(hit)) => SEARCH_PER_COARSE_CELL * hit.coarse_cells as u64 + SEARCH_FINE,
@@ -76,23 +75,11 @@ pub fn estimate(report: &FrameReport, binned_px: usize, cfg: &NavConfig) -> u64 
             | SearchError::PriorTooWide
             | SearchError::FlatFrame,
         )) => 0,
+        // No cell with enough valid reference: the coarse lattice ran, nothing after it.
+        Some(Err(SearchError::NoCandidate)) => SEARCH_PER_COARSE_CELL * full_lattice,
         Some(Err(_)) => SEARCH_PER_COARSE_CELL * full_lattice + SEARCH_FINE,
     };
-    let (iters, samples) = if from_search {
-        (
-            cfg.search.refine_max_iterations,
-            cfg.search.refine_max_samples,
-        )
-    } else {
-        (cfg.refine.max_iterations, cfg.refine.max_samples)
-    };
-    let passes_samples = match &report.refine {
-        None => 0,
-        Some(Ok(r)) => (r.iterations as u64 + 1) * r.samples as u64,
-        Some(Err(RefineError::NotConverged)) => {
-            (iters.min(nav_core::refine::MAX_ITERATIONS) as u64 + 1) * samples as u64
-        }
-        Some(Err(_)) => samples as u64,
-    };
-    n + REFINE_PER_SAMPLE_PASS * passes_samples
+    // Every refinement the frame ran (a search hit's and a feature fix's), as the navigator
+    // counted it.
+    n + REFINE_PER_SAMPLE_PASS * report.refine_sample_passes as u64
 }
