@@ -77,7 +77,7 @@ pub struct NavConfig {
     /// With a prior, run the area search first on a DEM frame's slope alone ([`Self::locate_dem`];
     /// the atlas and slope-image paths keep the feature path first), and detect and
     /// match features only when it gives no fix (without searching again). A frame the
-    /// search fixes then skips detection, descriptors and matching (≈ 6–9 M Cortex-M4
+    /// search fixes then skips detection, descriptors and matching (≈ 6–10 M Cortex-M4
     /// instructions of a 200 × 200 frame, docs/bounds.md); one it does not pays for the search
     /// before its feature path. Without it, the search runs only after the feature path
     /// failed, and a search fix after a full keypoint budget overran the flyer's 20 M budget
@@ -187,10 +187,34 @@ pub struct FrameReport {
     /// inliers but at least [`GateConfig::min_inliers_verified`], or clustered inliers): the
     /// fix stood only if the refinement confirmed it.
     pub needed_confirmation: bool,
-    /// The prior-aided area search: `None` when it did not run (a feature fix, no prior, or
-    /// search disabled), otherwise its best alignment or why it found none. Its fix, if any,
+    /// The prior-aided area search: `None` when it did not run (no prior, search disabled, or
+    /// on the features-first paths a feature fix), otherwise its best alignment or why it
+    /// found none. Its fix, if any,
     /// is the outcome (with [`Fix::area_search`] set).
     pub search: Option<Result<SearchHit, SearchError>>,
+}
+
+impl FrameReport {
+    /// A frame nothing has been run on yet: no fix (too few features), every counter zero.
+    fn nothing_yet() -> Self {
+        Self {
+            outcome: Err(NoFix::TooFewFeatures),
+            features: 0,
+            features_dropped: 0,
+            matches: 0,
+            inliers: 0,
+            msac_iterations: 0,
+            affine: None,
+            match_stats: MatchStats::default(),
+            detect_stats: crate::detector::DetectStats::default(),
+            detected: false,
+            search_first: false,
+            refine_sample_passes: 0,
+            refine: None,
+            needed_confirmation: false,
+            search: None,
+        }
+    }
 }
 
 /// Caller-owned working memory for one frame: slope buffer, SURF scratch, up to `MAX_KP` frame
@@ -350,21 +374,8 @@ impl<'t> Navigator<'t> {
             let img = ws.slope.image()?;
             let info = self.frame_info(&img, k, true);
             let mut first = FrameReport {
-                outcome: Err(NoFix::TooFewFeatures),
-                features: 0,
-                features_dropped: 0,
-                matches: 0,
-                inliers: 0,
-                msac_iterations: 0,
-                affine: None,
-                match_stats: MatchStats::default(),
-                detect_stats: crate::detector::DetectStats::default(),
-                detected: false,
                 search_first: true,
-                refine_sample_passes: 0,
-                refine: None,
-                needed_confirmation: false,
-                search: None,
+                ..FrameReport::nothing_yet()
             };
             self.area_search(&mut first, &img, k, &info, (w, h), prior);
             if first.outcome.is_ok() {
@@ -436,24 +447,8 @@ impl<'t> Navigator<'t> {
         dem: &DemPatch<'_>,
         k: usize,
     ) -> Result<(), NavError> {
-        let NavWorkspace {
-            slope,
-            surf,
-            features,
-            ..
-        } = ws;
-        let sigma_px = self.frame_smoothing_px(dem.pixel_m() * k as f32);
-        let img = if k > 1 || sigma_px > 0.0 {
-            slope.compute_binned_smoothed::<W>(dem, k, sigma_px, self.cfg.fill_dropouts)?
-        } else if self.cfg.fill_dropouts {
-            slope.compute_from_filled(dem)?
-        } else {
-            slope.compute_from(dem)?
-        };
-        let cfg = self.frame_surf_config(img.pixel_m());
-        extract(&img, &cfg, surf.scratch(), features)?;
-        features.unbin(k);
-        Ok(())
+        self.slope_dem(ws, dem, k)?;
+        self.features_of_slope(ws, k)
     }
 
     /// The part of [`Self::locate_dem`] after the frame's slope and features are in `ws`:
@@ -763,21 +758,11 @@ impl<'t> Navigator<'t> {
     ) -> FrameReport {
         let feats = ws.features.as_slice();
         let mut report = FrameReport {
-            outcome: Err(NoFix::TooFewFeatures),
             features: feats.len() as u16,
             features_dropped: ws.features.dropped,
-            matches: 0,
-            inliers: 0,
-            msac_iterations: 0,
-            affine: None,
-            match_stats: MatchStats::default(),
             detect_stats: ws.features.stats,
             detected: true,
-            search_first: false,
-            refine_sample_passes: 0,
-            refine: None,
-            needed_confirmation: false,
-            search: None,
+            ..FrameReport::nothing_yet()
         };
         ws.matches.clear();
         // A frame whose consensus never runs (too few matches) must not show the last frame's

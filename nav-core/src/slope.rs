@@ -140,6 +140,14 @@ pub fn slope_into_binned_smoothed<'b, const CAP: usize>(
     let pixel_m = dem.pixel_m() * k as f32;
     let inv8 = 1.0 / (8.0 * pixel_m);
     let half = (k * k).div_ceil(2);
+    // A block needs at least half its cells valid.
+    let block_mean = |sum: f32, cnt: usize| {
+        if cnt >= half {
+            sum / cnt as f32
+        } else {
+            f32::NAN
+        }
+    };
     let (wt, rad) = gauss_weights(sigma_px);
     let ri = rad as isize;
     let ring = 2 * rad + 1;
@@ -214,11 +222,7 @@ pub fn slope_into_binned_smoothed<'b, const CAP: usize>(
                         sum += if ok { z } else { 0.0 };
                         cnt += usize::from(ok);
                     }
-                    *slot = if cnt >= half {
-                        sum / cnt as f32
-                    } else {
-                        f32::NAN
-                    };
+                    *slot = block_mean(sum, cnt);
                 }
             } else {
                 for (c, slot) in row.iter_mut().take(w).enumerate() {
@@ -231,11 +235,7 @@ pub fn slope_into_binned_smoothed<'b, const CAP: usize>(
                             }
                         }
                     }
-                    *slot = if cnt >= half {
-                        sum / cnt as f32
-                    } else {
-                        f32::NAN
-                    };
+                    *slot = block_mean(sum, cnt);
                 }
             }
         }

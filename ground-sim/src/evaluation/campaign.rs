@@ -204,11 +204,11 @@ pub fn fly_posed(
     )
     .map_err(|e| anyhow!("{e}"))?;
     let mut s = score(nav.tile(), &run, pose, frame.width, frame.height);
-    let k = nav.bin_factor(pose.pixel_m as f32).max(1);
     s.m4_instructions_est = Some(crate::flyer::m4_cost::estimate(
         &run.report,
-        (frame.width / k) * (frame.height / k),
-        nav.config(),
+        nav,
+        (frame.width, frame.height),
+        pose.pixel_m as f32,
     ));
     Ok(s)
 }

@@ -11,7 +11,7 @@
 //! coarse lattice and (unless no cell had enough valid reference) its fine level, a refused
 //! refinement its sample cap times its pass cap (`FrameReport::refine_sample_passes`).
 
-use nav_core::{FrameReport, NavConfig, SearchError};
+use nav_core::{FrameReport, Navigator, SearchError};
 
 /// The flyer's budget per frame, instructions (issue 15; asserted by the HIL run).
 pub const FLIGHT_BUDGET: u64 = 20_000_000;
@@ -41,9 +41,18 @@ pub const SEARCH_FINE: u64 = 2_300_000;
 /// equations: 0.57 M a pass of 800 samples).
 pub const REFINE_PER_SAMPLE_PASS: u64 = 715;
 
-/// Estimated instructions of the frame `report` came from, `binned_px` binned frame pixels,
-/// under `cfg` (the navigator's configuration: MSAC's confidence and sample cap).
-pub fn estimate(report: &FrameReport, binned_px: usize, cfg: &NavConfig) -> u64 {
+/// Estimated instructions of `nav`'s work on a `frame_w × frame_h` DEM frame of
+/// `frame_pixel_m` metres, from the `report` it gave (binned as `nav` bins it; its MSAC
+/// settings).
+pub fn estimate(
+    report: &FrameReport,
+    nav: &Navigator<'_>,
+    (frame_w, frame_h): (usize, usize),
+    frame_pixel_m: f32,
+) -> u64 {
+    let cfg = nav.config();
+    let k = nav.bin_factor(frame_pixel_m).max(1);
+    let binned_px = (frame_w / k) * (frame_h / k);
     let per_px = if report.detected {
         PER_BINNED_PX
     } else {

@@ -386,15 +386,12 @@ pub fn host_result_estimated(
     let header = frame_header(f, &payload);
     let out = crate::job::execute(nav, atlas, ws, fp, &header, &f.heights_m);
     let estimate = match &out {
-        crate::job::JobOutput::Locate(Ok(report)) => {
-            let k = nav.bin_factor(f.meta.pixel_m).max(1);
-            let binned = (f.meta.width as usize / k) * (f.meta.height as usize / k);
-            Some(ground_sim::flyer::m4_cost::estimate(
-                report,
-                binned,
-                nav.config(),
-            ))
-        }
+        crate::job::JobOutput::Locate(Ok(report)) => Some(ground_sim::flyer::m4_cost::estimate(
+            report,
+            nav,
+            (f.meta.width as usize, f.meta.height as usize),
+            f.meta.pixel_m,
+        )),
         _ => None,
     };
     (convert::job_result(f.meta.id, &out, fp), estimate)
