@@ -221,6 +221,7 @@ pub fn no_fix(n: NoFix) -> WireNoFix {
         NoFix::ResidualTooLarge => WireNoFix::ResidualTooLarge,
         NoFix::InconsistentWithPrior => WireNoFix::InconsistentWithPrior,
         NoFix::Unconfirmed => WireNoFix::Unconfirmed,
+        NoFix::OverBudget => WireNoFix::OverBudget,
     }
 }
 

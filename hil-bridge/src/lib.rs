@@ -59,7 +59,7 @@ pub mod target;
 pub mod host;
 
 /// Protocol version exchanged in the hello handshake; bumped on any incompatible change.
-pub const PROTOCOL_VERSION: u16 = 6;
+pub const PROTOCOL_VERSION: u16 = 7;
 
 pub use msg::Message;
 pub use packet::{PacketError, Received, Receiver, decode_packet, encode_packet, encode_wire};

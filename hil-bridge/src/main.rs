@@ -208,18 +208,24 @@ fn main() -> Result<()> {
                     report.max_instructions_per_frame
                 ));
             }
-            // The ground's cost model must track the measured counts (campaigns report their
-            // frames' budget overruns with it).
-            let (lo, hi) = ground_sim::flyer::m4_cost::HIL_RATIO_BOUNDS;
+            // The work model the navigator meters its frames with (and bounds them by) must
+            // track the measured counts, and no frame's work may pass the budget.
+            let (lo, hi) = nav_core::cost::HIL_RATIO_BOUNDS;
+            let work_budget = u64::from(nav_core::NavConfig::default().work_budget);
             for f in &report.per_frame {
                 if let Some(e) = f.estimated_instructions {
                     let ratio = e as f64 / f.instructions.max(1) as f64;
                     if !(lo..=hi).contains(&ratio) {
                         failures.push(format!(
-                            "{}: the cost model estimates {e} instructions, measured {} \
-                             (ratio {ratio:.3}, bounds {lo}–{hi}): recalibrate \
-                             ground_sim::flyer::m4_cost",
+                            "{}: the work model estimates {e} instructions, measured {} \
+                             (ratio {ratio:.3}, bounds {lo}–{hi}): recalibrate nav_core::cost",
                             f.name, f.instructions
+                        ));
+                    }
+                    if e > work_budget {
+                        failures.push(format!(
+                            "{}: the navigator metered {e} work units, budget {work_budget}",
+                            f.name
                         ));
                     }
                 }

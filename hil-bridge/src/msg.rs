@@ -315,6 +315,8 @@ pub enum WireNoFix {
     InconsistentWithPrior,
     /// Not confirmed (or contradicted) by the dense slope correlation.
     Unconfirmed,
+    /// The frame's work budget had no room for the stage that could have fixed it.
+    OverBudget,
 }
 
 /// Why the navigator refused a frame outright (mirrors `nav_core::NavError`, flattened).

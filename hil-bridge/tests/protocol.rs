@@ -147,7 +147,7 @@ fn golden() -> Vec<(u16, Message<'static>, &'static str)> {
 #[test]
 fn golden_vectors_encode_and_decode() {
     assert_eq!(
-        PROTOCOL_VERSION, 6,
+        PROTOCOL_VERSION, 7,
         "a version bump needs new golden vectors"
     );
     for (seq, msg, bytes) in golden() {

@@ -20,7 +20,17 @@ fn the_search_goes_first_with_a_prior_and_the_features_follow_when_it_fails() {
             .unwrap_or_else(|| panic!("no frame {name}"))
     };
     let first = Navigator::new(tile, NavConfig::default());
+    // Features first, without a work budget: the order as it was (this frame then cost 27.9 M
+    // instructions on the target, session 28).
     let after = Navigator::new(
+        tile,
+        NavConfig {
+            search_first: false,
+            work_budget: u32::MAX,
+            ..NavConfig::default()
+        },
+    );
+    let after_flight = Navigator::new(
         tile,
         NavConfig {
             search_first: false,
@@ -36,6 +46,12 @@ fn the_search_goes_first_with_a_prior_and_the_features_follow_when_it_fails() {
     assert!(!a.detected && a.features == 0, "{a:?}");
     let fix_a = a.outcome.expect("a search fix");
     assert!(fix_a.area_search);
+    // Features first under the flight work budget: after 16 keypoints no room is left for
+    // the search, and the frame says so instead of overrunning.
+    let bf = after_flight.locate_dem(&mut ws, &dem, Some(&p)).unwrap();
+    assert!(bf.over_budget && bf.outcome.is_err(), "{bf:?}");
+    assert_eq!(bf.search, Some(Err(nav_core::SearchError::OverBudget)));
+    assert!(bf.work <= after_flight.config().work_budget, "{}", bf.work);
     let b = after.locate_dem(&mut ws, &dem, Some(&p)).unwrap();
     assert!(b.detected && b.features == 16, "{b:?}");
     let fix_b = b.outcome.expect("a search fix after the feature path");

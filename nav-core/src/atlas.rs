@@ -911,7 +911,8 @@ impl AtlasNavigator {
             let nav = Navigator::new(source.tile(first)?, self.cfg.nav);
             let k = nav.bin_factor(dem.pixel_m());
             nav.extract_dem(ws, dem, k)?;
-            let mut report = nav.locate_extracted_dem(ws, w, h, k, Some(&tp), false)?;
+            let spent = nav.extraction_work(ws);
+            let mut report = nav.locate_extracted_dem(ws, (w, h), k, Some(&tp), false, spent)?;
             let hangs_over = candidates.depth_px[0] < candidates.half_diag_px;
             let neighbours = report.outcome.is_err()
                 && candidates.straddles
@@ -928,6 +929,8 @@ impl AtlasNavigator {
         out.tried = 1;
         out.tile = Some(first);
         out.tile_offset_px = [e.col0, e.row0];
+        // The frame's work and budget verdict over every tile tried.
+        let (mut spent, mut over_budget) = (report.work, report.over_budget);
         if neighbours {
             for &index in candidates.as_slice().iter().take(budget).skip(1) {
                 let Some(e) = source.atlas().entry(index as usize) else {
@@ -940,8 +943,17 @@ impl AtlasNavigator {
                     continue;
                 };
                 let nav = Navigator::new(tile, self.cfg.nav);
-                let r = nav.locate_extracted_dem(ws, w, h, k, Some(&e.tile_prior(prior)), false)?;
+                let r = nav.locate_extracted_dem(
+                    ws,
+                    (w, h),
+                    k,
+                    Some(&e.tile_prior(prior)),
+                    false,
+                    spent,
+                )?;
                 out.tried += 1;
+                spent = r.work;
+                over_budget |= r.over_budget;
                 if r.outcome.is_ok() {
                     out.tile = Some(index);
                     out.tile_offset_px = [e.col0, e.row0];
@@ -954,6 +966,8 @@ impl AtlasNavigator {
                 }
             }
         }
+        report.work = spent;
+        report.over_budget = over_budget;
         out.report = Some(report);
         Ok(out)
     }

@@ -65,6 +65,7 @@
 extern crate std;
 
 pub mod atlas;
+pub mod cost;
 pub mod describe;
 pub mod detector;
 pub mod filter;

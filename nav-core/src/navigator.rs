@@ -1,12 +1,13 @@
 //! One call per frame: DEM patch (or slope image) in, fix or typed no-fix out, against a
 //! reference tile, with a caller-owned workspace.
 
+use crate::cost;
 use crate::frame::{DemPatch, FrameError, SlopeBuffer, SlopeImage};
 use crate::matching::{Match, MatchConfig, MatchStats, match_features};
 use crate::msac::{Affine, Correspondence, MsacConfig, msac};
 use crate::pose::{Fix, GateConfig, NoFix, make_fix};
-use crate::refine::{FrameInfo, RefineConfig, RefineError, Refined, refine};
-use crate::search::{SearchConfig, SearchError, SearchHit, search};
+use crate::refine::{FrameInfo, RefineConfig, RefineError, Refined, refine_metered};
+use crate::search::{SearchConfig, SearchError, SearchHit, search_metered};
 use crate::surf::{Features, SurfConfig, SurfError, SurfWorkspace, extract};
 use crate::tile::Tile;
 use core::fmt;
@@ -84,6 +85,14 @@ pub struct NavConfig {
     /// (session 28; with it, on the terrain suite's 36 campaigns with a prior, success the same
     /// or higher, no false fix, docs/registration.md).
     pub search_first: bool,
+    /// Work budget of one frame, in [`crate::cost`] units (estimated Cortex-M4 instructions):
+    /// before each variable stage (area search, a feature path after a failed search, MSAC,
+    /// each refinement) the navigator checks that the stage's worst case fits in what is left,
+    /// and skips it or caps its samples and passes to fit ([`FrameReport::over_budget`]). A
+    /// frame's [`FrameReport::work`] is then at most the larger of this and its fixed first
+    /// stage ([`crate::cost::fixed_first_stage`]). Default [`crate::cost::FLIGHT_BUDGET`]
+    /// (20 M); `u32::MAX` leaves the frame unbounded (a ground-only option).
+    pub work_budget: u32,
 }
 
 impl Default for NavConfig {
@@ -102,18 +111,21 @@ impl Default for NavConfig {
             refine: RefineConfig::default(),
             search: SearchConfig::default(),
             search_first: true,
+            work_budget: crate::cost::FLIGHT_BUDGET,
         }
     }
 }
 
-/// Upper bound of the samples × passes a refinement under `cfg` ran, from its result: exact
-/// when it converged, the caps when it was refused, nothing when it could not start.
-fn refine_work(result: &Result<Refined, RefineError>, cfg: &RefineConfig) -> u32 {
-    match result {
-        Ok(r) => (r.iterations as u32 + 1).saturating_mul(r.samples),
-        Err(RefineError::NoRaster | RefineError::Disabled) => 0,
-        Err(_) => (cfg.max_iterations.min(crate::refine::MAX_ITERATIONS) as u32 + 1)
-            .saturating_mul(cfg.max_samples),
+/// Work of what an area search ran: its coarse cells and, if it got there, its fine level and
+/// runners.
+fn search_work(w: &crate::search::SearchWork) -> u32 {
+    let coarse = w.coarse_cells.saturating_mul(cost::SEARCH_PER_COARSE_CELL);
+    if w.fine {
+        coarse
+            .saturating_add(cost::SEARCH_FINE_WINNER)
+            .saturating_add(cost::SEARCH_PER_RUNNER.saturating_mul(u32::from(w.runners)))
+    } else {
+        coarse
     }
 }
 
@@ -176,9 +188,9 @@ pub struct FrameReport {
     /// still without a fix then went through the feature path after it, whose verdict is the
     /// outcome (and `search` keeps the search's).
     pub search_first: bool,
-    /// The dense refinements' work in this frame, samples × passes summed over every
-    /// refinement run (a search hit's and a feature fix's): exact for one that converged, its
-    /// sample cap times its pass cap for one refused (the error does not say how far it went).
+    /// The dense refinements' work in this frame: valid samples summed over every pass of every
+    /// refinement run (a search hit's and a feature fix's), whatever their result, the final
+    /// pass of each weighing [`crate::refine::SANDWICH_PASS_WEIGHT`].
     pub refine_sample_passes: u32,
     /// The dense refinement of the fix: `None` when there was no feature fix to refine,
     /// otherwise what it gave or why it was not applied (the fix then stands unrefined).
@@ -192,6 +204,13 @@ pub struct FrameReport {
     /// found none. Its fix, if any,
     /// is the outcome (with [`Fix::area_search`] set).
     pub search: Option<Result<SearchHit, SearchError>>,
+    /// Work this frame spent, [`crate::cost`] units (estimated Cortex-M4 instructions; upper-
+    /// leaning where the navigator cannot see: a failed MSAC is charged its adaptive stop on
+    /// matches that agree on nothing).
+    pub work: u32,
+    /// The work budget ([`NavConfig::work_budget`]) skipped a stage or capped a stage's
+    /// samples or passes in this frame.
+    pub over_budget: bool,
 }
 
 impl FrameReport {
@@ -213,7 +232,14 @@ impl FrameReport {
             refine: None,
             needed_confirmation: false,
             search: None,
+            work: 0,
+            over_budget: false,
         }
+    }
+
+    /// Add `w` work units.
+    fn charge(&mut self, w: u32) {
+        self.work = self.work.saturating_add(w);
     }
 }
 
@@ -364,19 +390,21 @@ impl<'t> Navigator<'t> {
         prior: Option<&Prior>,
     ) -> Result<FrameReport, NavError> {
         let k = self.bin_factor(dem.pixel_m());
+        let (w, h) = (dem.width(), dem.height());
         if self.cfg.search_first
             && self.cfg.search.enabled
             && prior.is_some()
             && self.tile.slope_raster().is_some()
         {
-            let (w, h) = (dem.width(), dem.height());
             self.slope_dem(ws, dem, k)?;
             let img = ws.slope.image()?;
+            let binned_px = img.width() * img.height();
             let info = self.frame_info(&img, k, true);
             let mut first = FrameReport {
                 search_first: true,
                 ..FrameReport::nothing_yet()
             };
+            first.charge(cost::slope(binned_px));
             self.area_search(&mut first, &img, k, &info, (w, h), prior);
             if first.outcome.is_ok() {
                 ws.features.clear();
@@ -384,11 +412,27 @@ impl<'t> Navigator<'t> {
                 ws.inlier.fill(false);
                 return Ok(first);
             }
+            // The feature path's detection and a whole keypoint budget must fit in what the
+            // search left, or the frame ends here.
+            let need = cost::detection(binned_px).saturating_add(cost::keypoints(K));
+            if need > self.room(&first) {
+                ws.features.clear();
+                ws.matches.clear();
+                ws.inlier.fill(false);
+                first.outcome = Err(NoFix::OverBudget);
+                first.over_budget = true;
+                return Ok(first);
+            }
             self.features_of_slope(ws, k)?;
-            let mut report = self.locate_extracted_dem(ws, w, h, k, prior, false)?;
+            let spent = first
+                .work
+                .saturating_add(cost::detection(binned_px))
+                .saturating_add(cost::keypoints(ws.features.len()));
+            let mut report = self.locate_extracted_dem(ws, (w, h), k, prior, false, spent)?;
             // The search's verdict stays in the report (it ran, and why it gave nothing).
             report.search = first.search;
             report.search_first = true;
+            report.over_budget |= first.over_budget;
             report.refine_sample_passes = report
                 .refine_sample_passes
                 .saturating_add(first.refine_sample_passes);
@@ -398,7 +442,57 @@ impl<'t> Navigator<'t> {
             return Ok(report);
         }
         self.extract_dem(ws, dem, k)?;
-        self.locate_extracted_dem(ws, dem.width(), dem.height(), k, prior, true)
+        let spent = self.extraction_work(ws);
+        self.locate_extracted_dem(ws, (w, h), k, prior, true, spent)
+    }
+
+    /// Work of the slope and features now in `ws` (binned as they were computed).
+    pub(crate) fn extraction_work<
+        const P: usize,
+        const W: usize,
+        const K: usize,
+        const M: usize,
+    >(
+        &self,
+        ws: &NavWorkspace<P, W, K, M>,
+    ) -> u32 {
+        let binned_px = ws.slope.image().map_or(0, |i| i.width() * i.height());
+        cost::slope(binned_px)
+            .saturating_add(cost::detection(binned_px))
+            .saturating_add(cost::keypoints(ws.features.len()))
+    }
+
+    /// What is left of the frame's work budget after `report`'s work.
+    fn room(&self, report: &FrameReport) -> u32 {
+        self.cfg.work_budget.saturating_sub(report.work)
+    }
+
+    /// Refine `initial` under `cfg` with the samples × passes the rest of `report`'s budget
+    /// pays for, and charge what it ran (marking the report when the budget stopped it).
+    #[allow(clippy::too_many_arguments)]
+    fn refine_charged(
+        &self,
+        report: &mut FrameReport,
+        img: &SlopeImage<'_>,
+        k: usize,
+        raster: &crate::tile::SlopeRaster<'_>,
+        initial: &Affine,
+        info: &FrameInfo,
+        cfg: &RefineConfig,
+    ) -> Result<Refined, RefineError> {
+        let allowance = self.room(report) / cost::REFINE_PER_SAMPLE_PASS;
+        let rcfg = RefineConfig {
+            max_sample_passes: cfg.max_sample_passes.min(allowance),
+            ..*cfg
+        };
+        let mut work = 0u32;
+        let result = refine_metered(img, k, raster, initial, info, &rcfg, &mut work);
+        report.refine_sample_passes = report.refine_sample_passes.saturating_add(work);
+        report.charge(cost::refine(work));
+        if result == Err(RefineError::OverBudget) {
+            report.over_budget = true;
+        }
+        result
     }
 
     /// The frame's slope alone (binned by `k`, smoothed as the tile says) into `ws`.
@@ -452,9 +546,10 @@ impl<'t> Navigator<'t> {
     }
 
     /// The part of [`Self::locate_dem`] after the frame's slope and features are in `ws`:
-    /// matching, consensus, refinement, prior gate and (with `area_search`) the area search.
-    /// The atlas ([`crate::atlas`]) calls it again on a neighbour tile whose extraction
-    /// settings equal the first tile's, so the frame is not extracted twice.
+    /// matching, consensus, refinement, prior gate and (with `area_search`) the area search,
+    /// the frame having spent `spent` work units before ([`FrameReport::work`]). The atlas
+    /// ([`crate::atlas`]) calls it again on a neighbour tile whose extraction settings equal
+    /// the first tile's, so the frame is not extracted twice.
     pub(crate) fn locate_extracted_dem<
         const P: usize,
         const W: usize,
@@ -463,13 +558,13 @@ impl<'t> Navigator<'t> {
     >(
         &self,
         ws: &mut NavWorkspace<P, W, K, M>,
-        width: usize,
-        height: usize,
+        (width, height): (usize, usize),
         k: usize,
         prior: Option<&Prior>,
         area_search: bool,
+        spent: u32,
     ) -> Result<FrameReport, NavError> {
-        let mut report = self.locate_features(ws, width, height, prior);
+        let mut report = self.locate_features(ws, width, height, prior, spent);
         let img = ws.slope.image()?;
         let info = self.frame_info(&img, k, true);
         self.refine_fix(&mut report, &img, k, &info, width, height);
@@ -519,7 +614,10 @@ impl<'t> Navigator<'t> {
             let cfg = self.frame_surf_config(img.pixel_m());
             extract(img, &cfg, ws.surf.scratch(), &mut ws.features)?;
         }
-        let mut report = self.locate_features(ws, img.width(), img.height(), prior);
+        // The image comes with its slope: the frame is charged from detection on.
+        let binned_px = (img.width() / k.max(1)) * (img.height() / k.max(1));
+        let spent = cost::detection(binned_px).saturating_add(cost::keypoints(ws.features.len()));
+        let mut report = self.locate_features(ws, img.width(), img.height(), prior, spent);
         let binned;
         let used = if k > 1 {
             binned = ws.slope.image()?;
@@ -574,14 +672,14 @@ impl<'t> Navigator<'t> {
         let Ok(fix) = &mut report.outcome else {
             return;
         };
+        let initial = fix.affine;
         let result = match self.tile.slope_raster() {
             None if self.cfg.refine.enabled => Err(RefineError::NoRaster),
             None => Err(RefineError::Disabled),
-            Some(raster) => refine(img, k, raster, &fix.affine, info, &self.cfg.refine),
+            Some(raster) => {
+                self.refine_charged(report, img, k, raster, &initial, info, &self.cfg.refine)
+            }
         };
-        report.refine_sample_passes = report
-            .refine_sample_passes
-            .saturating_add(refine_work(&result, &self.cfg.refine));
         let Ok(fix) = &mut report.outcome else {
             return;
         };
@@ -597,6 +695,11 @@ impl<'t> Navigator<'t> {
         if (report.needed_confirmation && !confirmed) || (gate.reject_contradicted && contradicted)
         {
             report.outcome = Err(NoFix::Unconfirmed);
+        }
+        // A fix the budget left unchecked does not stand: on the InSAR plains (seed 2, no
+        // prior) two such fixes were 66 and 95 m off, refinements having refused or moved them.
+        if result == Err(RefineError::OverBudget) {
+            report.outcome = Err(NoFix::OverBudget);
         }
         report.refine = Some(result);
     }
@@ -625,19 +728,27 @@ impl<'t> Navigator<'t> {
             report.search = Some(Err(SearchError::NoRaster));
             return;
         };
-        let hit = search(img, k, raster, p, &self.cfg.search);
-        report.search = Some(hit);
-        let Ok(hit) = hit else { return };
         let rcfg = RefineConfig {
             max_samples: self.cfg.search.refine_max_samples,
             max_iterations: self.cfg.search.refine_max_iterations,
             ..self.cfg.refine
         };
+        // The whole lattice and a hit's shortest refinement (a step and its final pass) must
+        // fit in what is left.
+        let need = cost::search_worst()
+            .saturating_add(cost::refine_pass(rcfg.max_samples).saturating_mul(2));
+        if need > self.room(report) {
+            report.search = Some(Err(SearchError::OverBudget));
+            report.over_budget = true;
+            return;
+        }
+        let mut work = crate::search::SearchWork::default();
+        let hit = search_metered(img, k, raster, p, &self.cfg.search, &mut work);
+        report.search = Some(hit);
+        report.charge(search_work(&work));
+        let Ok(hit) = hit else { return };
         // A refused hit leaves the refinement's verdict in the report (why no fix).
-        let result = refine(img, k, raster, &hit.affine, info, &rcfg);
-        report.refine_sample_passes = report
-            .refine_sample_passes
-            .saturating_add(refine_work(&result, &rcfg));
+        let result = self.refine_charged(report, img, k, raster, &hit.affine, info, &rcfg);
         let r = match result {
             Ok(r) if r.ncc_after >= self.cfg.search.confirm_min_ncc => r,
             Ok(_) => {
@@ -674,11 +785,26 @@ impl<'t> Navigator<'t> {
         }
     }
 
-    /// Fill the correspondences from the match list and run MSAC on them.
+    /// Fill the correspondences from the match list and run MSAC on them, with at most the
+    /// samples the rest of `report`'s budget pays for (charged to it). `Err(())`: not one
+    /// sample fits.
     fn consensus<const P: usize, const W: usize, const K: usize, const M: usize>(
         &self,
         ws: &mut NavWorkspace<P, W, K, M>,
-    ) -> Option<crate::msac::MsacResult> {
+        report: &mut FrameReport,
+    ) -> Result<Option<crate::msac::MsacResult>, ()> {
+        let n = ws.matches.len();
+        let per_sample = cost::msac_sample(n).max(1);
+        let affordable = self.room(report) / per_sample;
+        let mut mcfg = self.cfg.msac;
+        let capped = affordable < mcfg.max_iterations as u32;
+        if capped {
+            if affordable == 0 {
+                report.over_budget = true;
+                return Err(());
+            }
+            mcfg.max_iterations = affordable as u16;
+        }
         let feats = ws.features.as_slice();
         for (m, slot) in ws.matches.iter().zip(ws.pts.iter_mut()) {
             let tk = self.tile.keypoint(m.tile as usize);
@@ -692,8 +818,20 @@ impl<'t> Navigator<'t> {
                 };
             }
         }
-        let pts = ws.pts.get(..ws.matches.len())?;
-        msac(pts, &mut ws.inlier, &self.cfg.msac)
+        let Some(pts) = ws.pts.get(..n) else {
+            return Ok(None);
+        };
+        let r = msac(pts, &mut ws.inlier, &mcfg);
+        let samples = match &r {
+            Some(r) => r.iterations as u32,
+            None => cost::msac_samples_without_consensus(n, &mcfg),
+        };
+        report.charge(samples.saturating_mul(per_sample));
+        // The lowered cap bound only if MSAC drew up to it.
+        if capped && samples >= mcfg.max_iterations as u32 {
+            report.over_budget = true;
+        }
+        Ok(r)
     }
 
     /// Replace the match list by guided matches under `affine`; false if too few were found.
@@ -755,6 +893,7 @@ impl<'t> Navigator<'t> {
         frame_w: usize,
         frame_h: usize,
         prior: Option<&Prior>,
+        spent: u32,
     ) -> FrameReport {
         let feats = ws.features.as_slice();
         let mut report = FrameReport {
@@ -762,6 +901,7 @@ impl<'t> Navigator<'t> {
             features_dropped: ws.features.dropped,
             detect_stats: ws.features.stats,
             detected: true,
+            work: spent,
             ..FrameReport::nothing_yet()
         };
         ws.matches.clear();
@@ -811,13 +951,24 @@ impl<'t> Navigator<'t> {
             report.outcome = Err(NoFix::TooFewMatches);
             return report;
         }
-        let Some(mut r) = self.consensus(ws) else {
-            report.outcome = Err(NoFix::TooFewInliers);
-            return report;
+        let mut r = match self.consensus(ws, &mut report) {
+            Ok(Some(r)) => r,
+            Ok(None) => {
+                report.outcome = Err(NoFix::TooFewInliers);
+                return report;
+            }
+            Err(()) => {
+                report.outcome = Err(NoFix::OverBudget);
+                return report;
+            }
         };
         if self.cfg.guided_radius_px > 0.0 && self.guided_matches(ws, &r.affine) {
-            match self.consensus(ws) {
-                Some(g) if g.inliers >= r.inliers => r = g,
+            match self.consensus(ws, &mut report) {
+                Ok(Some(g)) if g.inliers >= r.inliers => r = g,
+                Err(()) => {
+                    report.outcome = Err(NoFix::OverBudget);
+                    return report;
+                }
                 // Cannot happen in practice (the first inliers are among the guided candidates);
                 // if it does, the frame is inconsistent and no fix is the safe answer.
                 _ => {

@@ -118,6 +118,10 @@ pub enum NoFix {
     /// The dense slope correlation did not back the fix: a thin consensus (fewer than
     /// `min_inliers`) it did not confirm, or (with `reject_contradicted`) a fix it contradicted.
     Unconfirmed,
+    /// The frame's work budget ([`crate::NavConfig::work_budget`]) had no room for the stage
+    /// that could have fixed it (the feature path after a failed area search, or MSAC) or for
+    /// the refinement that checks a feature fix (an unchecked fix does not stand).
+    OverBudget,
 }
 
 impl fmt::Display for NoFix {
@@ -132,6 +136,7 @@ impl fmt::Display for NoFix {
             Self::ResidualTooLarge => "residual too large",
             Self::InconsistentWithPrior => "fix inconsistent with the prior",
             Self::Unconfirmed => "not confirmed by the slope correlation",
+            Self::OverBudget => "no room left in the frame's work budget",
         })
     }
 }

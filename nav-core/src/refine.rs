@@ -43,6 +43,13 @@ pub const MAX_ITERATIONS: u8 = 20;
 /// there runs out of iterations and is refused (`NotConverged`), as before the step control.
 pub const MIN_STEP_LENGTH: f64 = 0.125;
 
+/// What the final (sandwich) pass costs in plain passes: it also reads the reference's
+/// gradient and sums the sensitivity matrix, and the covariance follows it (HIL profiles,
+/// session 29: 3 passes of 729 samples cost 2.1–2.3 M Cortex-M4 instructions, ≈ 4 plain
+/// passes' worth). [`RefineConfig::max_sample_passes`] and the work counted by
+/// [`refine_metered`] are in plain-pass samples.
+pub const SANDWICH_PASS_WEIGHT: u32 = 2;
+
 /// How much lower than under the feature fix the refined correlation may be. NCC is not the
 /// objective (the Huber-weighted photometric residual is), so a better alignment can correlate
 /// a hair worse: measured −0.0003 on a frame whose rotation error fell from 0.077° to 0.007°.
@@ -82,6 +89,12 @@ pub struct RefineConfig {
     /// them, and a few percent of scale error became 10–20 m of position error that the
     /// alignment residuals could not show (fresh-crater floor, Shackleton rim; docs/registration.md).
     pub frame_scale_sigma: f32,
+    /// Work allowance, samples × passes (the final pass weighs [`SANDWICH_PASS_WEIGHT`]): a
+    /// pass starts only if its whole sample grid still fits in what is left of this, else the
+    /// refinement stops ([`RefineError::OverBudget`]).
+    /// The navigator sets it from the frame's work budget ([`crate::NavConfig::work_budget`]);
+    /// `u32::MAX` (the default) leaves the pass count to `max_iterations` alone.
+    pub max_sample_passes: u32,
 }
 
 impl Default for RefineConfig {
@@ -95,6 +108,7 @@ impl Default for RefineConfig {
             min_ncc: 0.5,
             converge_px: 0.03,
             frame_scale_sigma: 0.005,
+            max_sample_passes: u32::MAX,
         }
     }
 }
@@ -118,6 +132,9 @@ pub enum RefineError {
     /// The refined alignment correlates worse than the feature fix (by more than
     /// [`NCC_TOLERANCE`]) or less than [`RefineConfig::min_ncc`].
     WorseCorrelation,
+    /// Stopped (or not started) before converging: its next pass did not fit in
+    /// [`RefineConfig::max_sample_passes`] (the frame's work budget).
+    OverBudget,
 }
 
 impl fmt::Display for RefineError {
@@ -130,6 +147,7 @@ impl fmt::Display for RefineError {
             Self::NotConverged => "did not converge",
             Self::MovedTooFar => "moved too far from the feature fix",
             Self::WorseCorrelation => "correlation worse than the feature fix or too low",
+            Self::OverBudget => "no room left in the frame's work budget",
         })
     }
 }
@@ -518,6 +536,21 @@ pub fn refine(
     info: &FrameInfo,
     cfg: &RefineConfig,
 ) -> Result<Refined, RefineError> {
+    refine_metered(frame, bin, raster, initial, info, cfg, &mut 0)
+}
+
+/// [`refine`], adding to `work` the valid samples of every pass it ran (samples × passes, the
+/// final pass weighing [`SANDWICH_PASS_WEIGHT`], whatever the result: what the navigator
+/// charges the frame's work budget).
+pub fn refine_metered(
+    frame: &SlopeImage<'_>,
+    bin: usize,
+    raster: &SlopeRaster<'_>,
+    initial: &Affine,
+    info: &FrameInfo,
+    cfg: &RefineConfig,
+    work: &mut u32,
+) -> Result<Refined, RefineError> {
     if !cfg.enabled {
         return Err(RefineError::Disabled);
     }
@@ -555,6 +588,12 @@ pub fn refine(
         h.saturating_sub(2 * lo),
         cfg.max_samples,
     );
+    // Every pass reads at most this grid (an upper bound of its valid samples).
+    let grid = u32::try_from(
+        w.saturating_sub(2 * lo).div_ceil(st) * h.saturating_sub(2 * lo).div_ceil(st),
+    )
+    .unwrap_or(u32::MAX);
+    let mut allowance = cfg.max_sample_passes;
     // The scale prior as (log of the expected scale, 1σ of the log-scale).
     let sig = cfg.frame_scale_sigma as f64;
     let scale_prior = info
@@ -598,7 +637,17 @@ pub fn refine(
             huber,
             sandwich: converged || done >= iters,
         };
+        let weight = if model.sandwich {
+            SANDWICH_PASS_WEIGHT
+        } else {
+            1
+        };
+        let Some(rest) = allowance.checked_sub(grid.saturating_mul(weight)) else {
+            return Err(RefineError::OverBudget);
+        };
+        allowance = rest;
         let p = pass(frame, raster, &warp, (st, lo), centre, &model);
+        *work = work.saturating_add(p.n.saturating_mul(weight));
         if p.n < cfg.min_samples.max(8) {
             return Err(RefineError::TooFewSamples);
         }

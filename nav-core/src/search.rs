@@ -154,6 +154,9 @@ pub enum SearchError {
     NoMatch,
     /// Another peak correlates nearly as well as the best ([`SearchConfig::min_margin`]).
     Ambiguous,
+    /// Not run: the frame's work budget ([`crate::NavConfig::work_budget`]) had no room for
+    /// the whole lattice and a hit's refinement.
+    OverBudget,
 }
 
 impl core::fmt::Display for SearchError {
@@ -166,6 +169,7 @@ impl core::fmt::Display for SearchError {
             Self::NoCandidate => "too little valid reference under the prior window",
             Self::NoMatch => "nothing in the window correlates",
             Self::Ambiguous => "two peaks alike",
+            Self::OverBudget => "no room left in the frame's work budget",
         })
     }
 }
@@ -321,6 +325,17 @@ fn steps(half: f32, step: f32, max: usize) -> (i32, f32) {
     (n, step)
 }
 
+/// What a search ran, whatever its result (what the navigator charges the frame's work budget).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct SearchWork {
+    /// Coarse lattice cells correlated.
+    pub coarse_cells: u32,
+    /// The fine level ran (the winner's coarse climb and fine lattice).
+    pub fine: bool,
+    /// Runners searched on the fine level (each: its fine lattice, climb and valley path).
+    pub runners: u8,
+}
+
 /// Search the prior's window for the frame `img` (binned by `bin` from the frame's pixel grid)
 /// in `raster`. The prior's scale is tile pixels per unbinned frame pixel.
 pub fn search(
@@ -329,6 +344,18 @@ pub fn search(
     raster: &SlopeRaster<'_>,
     prior: &Prior,
     cfg: &SearchConfig,
+) -> Result<SearchHit, SearchError> {
+    search_metered(img, bin, raster, prior, cfg, &mut SearchWork::default())
+}
+
+/// [`search`], recording in `work` what it ran.
+pub fn search_metered(
+    img: &SlopeImage<'_>,
+    bin: usize,
+    raster: &SlopeRaster<'_>,
+    prior: &Prior,
+    cfg: &SearchConfig,
+    work: &mut SearchWork,
 ) -> Result<SearchHit, SearchError> {
     if !cfg.enabled {
         return Err(SearchError::Disabled);
@@ -409,6 +436,7 @@ pub fn search(
                 for ix in -np..=np {
                     let sx = ix * COARSE_STEP_PX;
                     cells += 1;
+                    work.coarse_cells = cells;
                     let mut k = Corr::default();
                     if c0 + sx >= 0 && c1 + sx < wr && r0 + sy >= 0 && r1 + sy < hr {
                         // The whole pattern lies inside the raster: linear indices, no 2-D
@@ -466,6 +494,7 @@ pub fn search(
     // fields the main peak's shoulders are the best lattice cells outside it, and they are not
     // ambiguity.
     let need = need.max(8);
+    work.fine = true;
     let (top, _) = climb(coarse, raster, top, need);
     // Fine level around the winner: ±1 px, half steps in heading and scale.
     let mut fine = [Sample::default(); FINE_GRID * FINE_GRID];
@@ -493,6 +522,7 @@ pub fn search(
         if c.ncc <= -1.0 {
             continue;
         }
+        work.runners = work.runners.saturating_add(1);
         let start = fine_peak(fine, raster, *c, (dh, ds, ns), need_fine);
         let (peak, settled) = climb(fine, raster, start, need_fine);
         if settled

@@ -204,12 +204,8 @@ pub fn fly_posed(
     )
     .map_err(|e| anyhow!("{e}"))?;
     let mut s = score(nav.tile(), &run, pose, frame.width, frame.height);
-    s.m4_instructions_est = Some(crate::flyer::m4_cost::estimate(
-        &run.report,
-        nav,
-        (frame.width, frame.height),
-        pose.pixel_m as f32,
-    ));
+    s.m4_instructions_est = Some(u64::from(run.report.work));
+    s.budget_cut = Some(run.report.over_budget);
     Ok(s)
 }
 
@@ -266,14 +262,21 @@ pub struct EvalSummary {
     pub refined_nees_mean: f64,
     /// Why fixes were not refined, and how often.
     pub refine_notes: BTreeMap<String, usize>,
-    /// Estimated Cortex-M4 instructions per frame (`flyer::m4_cost`, calibrated on the HIL
-    /// set): 95th percentile over all frames.
+    /// Work the navigator metered per frame (`FrameReport::work`: estimated Cortex-M4
+    /// instructions, `nav_core::cost`, checked against the HIL's measured counts): 95th
+    /// percentile over all frames.
     pub m4_instructions_p95: f64,
-    /// Fraction of all frames whose estimate exceeds the flyer's budget
-    /// (`flyer::m4_cost::FLIGHT_BUDGET`, 20 M): frames that would overrun on the target.
+    /// Fraction of all frames whose work exceeds the flyer's budget
+    /// (`nav_core::cost::FLIGHT_BUDGET`, 20 M): frames that would overrun on the target (none
+    /// with the flight configuration, whose work budget bounds every frame; a navigator
+    /// without one, `--budget host`, shows them).
     pub over_budget_frac: f64,
-    /// The same among the fixes: fixes the flyer could not afford as the navigator runs today.
+    /// The same among the fixes.
     pub fixes_over_budget_frac: f64,
+    /// Fraction of all frames in which the navigator's work budget skipped a stage or capped
+    /// one (`FrameReport::over_budget`).
+    #[serde(default)]
+    pub budget_cut_frac: f64,
     /// Frame pixel size range, metres.
     pub pixel_range_m: [f64; 2],
     /// Sensor model.
@@ -326,7 +329,7 @@ pub fn summarize(rows: &[TrnScore], spec: &CampaignSpec) -> EvalSummary {
         .iter()
         .filter_map(|r| r.m4_instructions_est.map(|v| v as f64))
         .collect();
-    let budget = crate::flyer::m4_cost::FLIGHT_BUDGET as f64;
+    let budget = nav_core::cost::FLIGHT_BUDGET as f64;
     let mean = |v: &[f64]| {
         if v.is_empty() {
             f64::NAN
@@ -367,6 +370,7 @@ pub fn summarize(rows: &[TrnScore], spec: &CampaignSpec) -> EvalSummary {
             .filter(|r| r.m4_instructions_est.is_some_and(|v| v as f64 > budget))
             .count() as f64
             / fixes.len().max(1) as f64,
+        budget_cut_frac: rows.iter().filter(|r| r.budget_cut == Some(true)).count() as f64 / n,
         pixel_range_m: [spec.pixel_min_m, spec.pixel_max_m],
         sensor: spec.sensor,
     }
@@ -391,12 +395,13 @@ pub fn print_summary(s: &EvalSummary) {
         s.no_fix_rate * 100.0
     );
     println!(
-        "M4 cost     est. p95 {:.1} M instructions; over the {} M budget: {:.1} % of frames, \
-         {:.1} % of fixes (flyer::m4_cost)",
+        "M4 work     p95 {:.1} M instructions (nav_core::cost); over the {} M budget: {:.1} % \
+         of frames, {:.1} % of fixes; a stage cut by the work budget in {:.1} % of frames",
         s.m4_instructions_p95 / 1e6,
-        crate::flyer::m4_cost::FLIGHT_BUDGET / 1_000_000,
+        nav_core::cost::FLIGHT_BUDGET / 1_000_000,
         s.over_budget_frac * 100.0,
-        s.fixes_over_budget_frac * 100.0
+        s.fixes_over_budget_frac * 100.0,
+        s.budget_cut_frac * 100.0
     );
     println!(
         "position    p50 {:.2} m  p95 {:.2} m  max {:.2} m",
@@ -447,7 +452,7 @@ pub fn write_csv_trials(path: &Path, trials: &[usize], rows: &[TrnScore]) -> any
     );
     writeln!(
         csv,
-        "trial,x_m,y_m,heading_deg,pixel_m,fix,false_fix,features,matches,inliers,rotation_deg,heading_err_deg,scale,scale_truth,pos_err_m,err_east_m,err_north_m,center_err_px,reg_err_mean_px,reg_err_max_px,center_sigma_m,nees,heading_sigma_deg,time_ms,refined,ncc,refined_sigma_m,refine_iterations,refine_note,area_search,m4_instructions_est,no_fix_reason"
+        "trial,x_m,y_m,heading_deg,pixel_m,fix,false_fix,features,matches,inliers,rotation_deg,heading_err_deg,scale,scale_truth,pos_err_m,err_east_m,err_north_m,center_err_px,reg_err_mean_px,reg_err_max_px,center_sigma_m,nees,heading_sigma_deg,time_ms,refined,ncc,refined_sigma_m,refine_iterations,refine_note,area_search,m4_instructions_est,budget_cut,no_fix_reason"
     )?;
     let o = |v: Option<f64>| v.map_or(String::new(), |x| format!("{x:.6}"));
     for (i, r) in trials.iter().zip(rows) {
@@ -459,7 +464,7 @@ pub fn write_csv_trials(path: &Path, trials: &[usize], rows: &[TrnScore]) -> any
         });
         writeln!(
             csv,
-            "{i},{:.3},{:.3},{:.4},{:.4},{},{},{},{},{},{},{},{},{:.6},{},{},{},{},{},{},{},{},{},{:.3},{},{},{},{},{},{},{},{}",
+            "{i},{:.3},{:.3},{:.4},{:.4},{},{},{},{},{},{},{},{},{:.6},{},{},{},{},{},{},{},{},{},{:.3},{},{},{},{},{},{},{},{},{}",
             t.x_m,
             t.y_m,
             t.heading_rad.to_degrees(),
@@ -491,6 +496,7 @@ pub fn write_csv_trials(path: &Path, trials: &[usize], rows: &[TrnScore]) -> any
             r.area_search,
             r.m4_instructions_est
                 .map_or(String::new(), |v| v.to_string()),
+            r.budget_cut.map_or(String::new(), |v| v.to_string()),
             r.no_fix_reason.as_deref().unwrap_or("")
         )?;
     }

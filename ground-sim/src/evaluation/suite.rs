@@ -682,7 +682,7 @@ pub fn table_markdown(r: &SuiteReport) -> String {
         },
     );
     s += concat!(
-        "| scene | tile | prior | success | false | no fix (reasons) | pos p50 / p95 m | heading p95 ° | in 3σ | NEES | ms/frame | M4 est. p95 (over 20 M: frames / fixes) | navmap (footprint) go: success / agree | navmap (rehearsal) go: success / agree |\n",
+        "| scene | tile | prior | success | false | no fix (reasons) | pos p50 / p95 m | heading p95 ° | in 3σ | NEES | ms/frame | M4 work p95 (frames over 20 M / budget cut) | navmap (footprint) go: success / agree | navmap (rehearsal) go: success / agree |\n",
         "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for row in &r.rows {
@@ -728,10 +728,10 @@ pub fn table_markdown(r: &SuiteReport) -> String {
             e.time_ms_mean,
             if e.m4_instructions_p95.is_finite() {
                 format!(
-                    "{:.1} M ({:.0} % / {:.0} %)",
+                    "{:.1} M ({:.0} % / {:.1} %)",
                     e.m4_instructions_p95 / 1e6,
                     100.0 * e.over_budget_frac,
-                    100.0 * e.fixes_over_budget_frac
+                    100.0 * e.budget_cut_frac
                 )
             } else {
                 "–".into()

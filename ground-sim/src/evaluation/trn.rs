@@ -55,9 +55,14 @@ pub struct TrnScore {
     /// Gauss–Newton updates the applied refinement made (`Refined::iterations`).
     #[serde(default)]
     pub refine_iterations: Option<u8>,
-    /// Estimated Cortex-M4 instructions of the frame (`flyer::m4_cost`); campaigns fill it.
+    /// The work nav-core metered for the frame (`FrameReport::work`: estimated Cortex-M4
+    /// instructions, `nav_core::cost`); campaigns fill it.
     #[serde(default)]
     pub m4_instructions_est: Option<u64>,
+    /// The navigator's work budget skipped a stage or capped one's samples or passes in this
+    /// frame (`FrameReport::over_budget`); campaigns fill it.
+    #[serde(default)]
+    pub budget_cut: Option<bool>,
     /// Estimated rotation, degrees.
     #[serde(with = "crate::evaluation::shard::opt_f64")]
     pub rotation_deg: Option<f64>,

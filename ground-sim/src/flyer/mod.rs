@@ -2,5 +2,4 @@
 //! ([`frames`]) and nav-core's flight code run on them in-process ([`onboard`]).
 
 pub mod frames;
-pub mod m4_cost;
 pub mod onboard;

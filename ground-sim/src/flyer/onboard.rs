@@ -3,7 +3,8 @@
 //!
 //! Two budgets: [`Budget::Flight`], the firmware's own ([`nav_core::flight`]: 200 × 200 px
 //! frames, 16 keypoints, 128 matches), which every campaign uses unless told otherwise, and
-//! [`Budget::Host`], a bigger one for frames up to 512 px and image registration on the ground,
+//! [`Budget::Host`], a bigger one for frames up to 512 px and image registration on the ground
+//! (and no per-frame work budget, `NavConfig::work_budget`),
 //! only ever chosen explicitly and labelled in every output.
 
 use std::time::Instant;
@@ -58,7 +59,7 @@ impl Budget {
                 nav_core::flight::MAX_MATCHES
             ),
             Self::Host => format!(
-                "host, bigger than what flies ({HOST_KEYPOINTS} keypoints, {HOST_MATCHES} matches)"
+                "host, bigger than what flies ({HOST_KEYPOINTS} keypoints, {HOST_MATCHES} matches, no work budget)"
             ),
         }
     }
@@ -120,7 +121,7 @@ pub fn run_odometry(
     let dem = DemPatch::new_checked(z, w, h, px as f32).map_err(OdometryError::Frame)?;
     match ws {
         Workspace::Flight(ws) => locate_on_keyframe(key, cfg, ws.as_mut(), &dem, prior),
-        Workspace::Host(ws) => locate_on_keyframe(key, cfg, ws.as_mut(), &dem, prior),
+        Workspace::Host(ws) => locate_on_keyframe(key, &unbounded(cfg), ws.as_mut(), &dem, prior),
     }
 }
 
@@ -153,7 +154,19 @@ pub fn run_frame(
 ) -> Result<FrameRun, NavError> {
     match ws {
         Workspace::Flight(w) => run_with(nav, w, input, prior),
-        Workspace::Host(w) => run_with(nav, w, input, prior),
+        Workspace::Host(w) => {
+            let host = Navigator::new(*nav.tile(), unbounded(nav.config()));
+            run_with(&host, w, input, prior)
+        }
+    }
+}
+
+/// `cfg` without a per-frame work budget: the host budget's keypoints alone would cost more
+/// than the flyer's 20 M (`nav_core::cost`), so that budget is not the flyer's in work either.
+fn unbounded(cfg: &NavConfig) -> NavConfig {
+    NavConfig {
+        work_budget: u32::MAX,
+        ..*cfg
     }
 }
 

@@ -123,7 +123,7 @@ pub struct FrameRecord {
     /// Atlas frames: tiles located on.
     pub atlas_tried: Option<u8>,
     /// TRN frames on the tile: the ground's cost model's estimate of this frame's
-    /// instructions (`ground_sim::flyer::m4_cost`), to compare with `instructions`.
+    /// instructions (`FrameReport::work`, `nav_core::cost`), to compare with `instructions`.
     pub estimated_instructions: Option<u64>,
 }
 
@@ -373,8 +373,9 @@ pub fn host_result(
     host_result_estimated(nav, atlas, ws, fp, f).0
 }
 
-/// [`host_result`] with, for a TRN frame on the tile, the ground's estimate of its Cortex-M4
-/// instructions ([`ground_sim::flyer::m4_cost::estimate`]) from the host's own report.
+/// [`host_result`] with, for a TRN frame (on the tile or the atlas), the work nav-core metered
+/// for it (`FrameReport::work`, estimated Cortex-M4 instructions, [`nav_core::cost`]) on the
+/// host.
 pub fn host_result_estimated(
     nav: &Navigator<'_>,
     atlas: Option<&Atlas<'_>>,
@@ -386,12 +387,8 @@ pub fn host_result_estimated(
     let header = frame_header(f, &payload);
     let out = crate::job::execute(nav, atlas, ws, fp, &header, &f.heights_m);
     let estimate = match &out {
-        crate::job::JobOutput::Locate(Ok(report)) => Some(ground_sim::flyer::m4_cost::estimate(
-            report,
-            nav,
-            (f.meta.width as usize, f.meta.height as usize),
-            f.meta.pixel_m,
-        )),
+        crate::job::JobOutput::Locate(Ok(report)) => Some(u64::from(report.work)),
+        crate::job::JobOutput::AtlasLocate(Ok(a)) => a.report.map(|r| u64::from(r.work)),
         _ => None,
     };
     (convert::job_result(f.meta.id, &out, fp), estimate)

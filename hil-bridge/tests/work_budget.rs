@@ -1,0 +1,131 @@
+//! The per-frame work budget (`NavConfig::work_budget`, `nav_core::cost`): whatever a frame
+//! runs into, its metered work stays within the budget or its fixed first stage, a stage that
+//! did not fit is skipped or capped and the report says so, and a frame the budget never
+//! touched gives exactly what an unbounded navigator gives. On the HIL set's own terrain, tile
+//! and frames, with each frame's own prior, an off-window prior and none.
+
+use hil_bridge::convert::prior;
+use hil_bridge::host::frames::{FRAME_PIXEL_M, generate_set};
+use hil_bridge::host::runner::Workspace;
+use nav_core::{DemPatch, NavConfig, Navigator, NoFix, Prior, Tile, cost, flight};
+
+#[test]
+fn no_frame_spends_more_than_its_budget_or_its_fixed_stage() {
+    let set = generate_set(6).expect("frame set");
+    let tile = Tile::parse(&set.tile).expect("tile");
+    let mut ws = Box::new(Workspace::new());
+    let unbounded = Navigator::new(
+        tile,
+        NavConfig {
+            work_budget: u32::MAX,
+            ..NavConfig::default()
+        },
+    );
+    let (mut checked, mut cut, mut untouched) = (0, 0, 0);
+    for f in &set.frames {
+        let (w, h) = (f.meta.width as usize, f.meta.height as usize);
+        let Ok(dem) = DemPatch::new_checked(&f.heights_m, w, h, f.meta.pixel_m) else {
+            continue;
+        };
+        if w * h > flight::MAX_FRAME_PX {
+            continue;
+        }
+        let own = f.meta.prior.as_ref().map(prior);
+        // A prior 40 px off (σ as given, or 2.5 px): the search fails, the features follow.
+        let off = own.map(|p| Prior {
+            center_tile_px: [p.center_tile_px[0] + 40.0, p.center_tile_px[1]],
+            ..p
+        });
+        for p in [own, off, None] {
+            let free = unbounded.locate_dem(&mut ws, &dem, p.as_ref()).unwrap();
+            for budget in (4..=20).map(|m| m * 1_000_000).chain([cost::FLIGHT_BUDGET]) {
+                let nav = Navigator::new(
+                    tile,
+                    NavConfig {
+                        work_budget: budget,
+                        ..NavConfig::default()
+                    },
+                );
+                let r = nav.locate_dem(&mut ws, &dem, p.as_ref()).unwrap();
+                let binned =
+                    (w / nav.bin_factor(f.meta.pixel_m)) * (h / nav.bin_factor(f.meta.pixel_m));
+                let fixed = cost::fixed_first_stage(
+                    binned,
+                    !(p.is_some() && nav.config().search_first),
+                    flight::MAX_KEYPOINTS,
+                );
+                assert!(
+                    r.work <= budget.max(fixed),
+                    "{} budget {budget}: work {} (fixed stage {fixed}): {r:?}",
+                    f.meta.name,
+                    r.work
+                );
+                checked += 1;
+                if r.over_budget {
+                    cut += 1;
+                } else {
+                    // Nothing capped: the very same report as without a budget.
+                    assert_eq!(r, free, "{} budget {budget}", f.meta.name);
+                    untouched += 1;
+                }
+                if matches!(r.outcome, Err(NoFix::OverBudget)) {
+                    assert!(r.over_budget, "{}: {r:?}", f.meta.name);
+                }
+            }
+        }
+    }
+    // The sweep reaches both sides: frames the small budgets cut, frames no budget touched.
+    assert!(
+        checked > 1000 && cut > 100 && untouched > 100,
+        "{checked} {cut} {untouched}"
+    );
+}
+
+#[test]
+fn a_failed_search_leaves_no_room_for_the_feature_path_under_a_small_budget() {
+    let set = generate_set(6).expect("frame set");
+    let tile = Tile::parse(&set.tile).expect("tile");
+    let mut ws = Box::new(Workspace::new());
+    let f = set
+        .frames
+        .iter()
+        .find(|f| f.meta.name.starts_with("noisy-02"))
+        .expect("noisy-02");
+    let dem = DemPatch::new_checked(&f.heights_m, 200, 200, FRAME_PIXEL_M).unwrap();
+    let p = prior(&f.meta.prior.expect("a prior"));
+    let off = Prior {
+        center_tile_px: [p.center_tile_px[0] + 40.0, p.center_tile_px[1]],
+        ..p
+    };
+    // Slope (5.6 M) and a failed search leave less than detection and 16 keypoints (10.4 M)
+    // under 12 M: the frame ends without SURF, and says why.
+    let nav = Navigator::new(
+        tile,
+        NavConfig {
+            work_budget: 12_000_000,
+            ..NavConfig::default()
+        },
+    );
+    let r = nav.locate_dem(&mut ws, &dem, Some(&off)).unwrap();
+    assert_eq!(r.outcome, Err(NoFix::OverBudget), "{r:?}");
+    assert!(r.over_budget && !r.detected && r.features == 0, "{r:?}");
+    assert!(matches!(r.search, Some(Err(_))), "{:?}", r.search);
+    assert!(r.work <= 12_000_000, "{}", r.work);
+    // Its own prior under the flight budget: the search fixes it, nothing capped.
+    let flight_nav = Navigator::new(tile, NavConfig::default());
+    let r = flight_nav.locate_dem(&mut ws, &dem, Some(&p)).unwrap();
+    assert!(r.outcome.is_ok() && !r.over_budget, "{r:?}");
+    // A budget that pays for the search but only part of its hit's refinement (this hit needs
+    // 15 updates): the refinement stops short, the hit is refused, the report says so.
+    let tight = Navigator::new(
+        tile,
+        NavConfig {
+            work_budget: r.work - 4 * cost::refine_pass(nav.config().search.refine_max_samples),
+            ..NavConfig::default()
+        },
+    );
+    let t = tight.locate_dem(&mut ws, &dem, Some(&p)).unwrap();
+    assert!(t.over_budget, "{t:?}");
+    assert!(t.work <= tight.config().work_budget, "{t:?}");
+    assert!(t.outcome.is_err(), "{t:?}");
+}
