@@ -103,6 +103,8 @@ fn merged_shards_equal_the_single_run_byte_for_byte() {
     let t0 = std::time::Instant::now();
 
     // eval: host time off, the only figure that differs from run to run.
+    // With a prior, as in flight: lost in space against this whole 8 km tile (over 1 000
+    // features) the flyer's work budget leaves no room past matching.
     let eval_args = [
         "--tile",
         s(&reference),
@@ -112,6 +114,10 @@ fn merged_shards_equal_the_single_run_byte_for_byte() {
         "21",
         "--seed",
         "5",
+        "--prior-sigma-m",
+        "50",
+        "--prior-heading-sigma-deg",
+        "2",
         "--no-host-time",
     ];
     let single = dir.path().join("eval-single");

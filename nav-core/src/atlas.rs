@@ -960,8 +960,9 @@ impl AtlasNavigator {
                     report = r;
                     break;
                 }
-                // One expensive stage per frame: after a refinement, no further neighbour.
-                if r.refine.is_some() {
+                // One expensive stage per frame: after a refinement, no further neighbour; and
+                // none once the work budget refused a stage.
+                if r.refine.is_some() || r.outcome == Err(crate::NoFix::OverBudget) {
                     break;
                 }
             }

@@ -13,7 +13,7 @@
 //! samples and passes the rest of the budget pays for ([`crate::FrameReport::over_budget`] says
 //! when a cap bound). A frame's work is then at most `max(budget, fixed)`, `fixed` being the
 //! stage every frame runs whatever the budget: slope, and on the feature path first its detection
-//! and keypoints ([`fixed_first_stage`]; 5.6 M or 16.0 M for a 200 × 200 frame binned by 2).
+//! and keypoints ([`fixed_first_stage`]; 5.6 M or 15.1 M for a 200 × 200 frame binned by 2).
 //!
 //! The constants come from HIL profiles under QEMU (the TCG plugin's per-block counts, sessions
 //! 28 and 29: 200 × 200 frames binned to 100 × 100, 50 m terrain smoothing); every HIL run compares
@@ -21,8 +21,6 @@
 //! [`HIL_RATIO_BOUNDS`], so a change of nav-core's costs the model misses fails CI. All
 //! arithmetic is integer (saturating) except MSAC's expected sample count, which uses `libm`,
 //! so the work, and therefore every decision it drives, is bit-identical on host and target.
-
-use crate::msac::MsacConfig;
 
 /// The flyer's budget per frame, Cortex-M4 instructions (issue 15; the HIL asserts it on the
 /// measured count of every frame).
@@ -34,10 +32,16 @@ pub const PER_BINNED_PX: u32 = 1_220;
 /// Binning, terrain smoothing and slope alone, per binned frame pixel (a frame the area search
 /// fixed before any detection: 5.35 M for 100 × 100).
 pub const SLOPE_PER_BINNED_PX: u32 = 560;
-/// Per frame keypoint kept: sub-pixel refinement in the detector, orientation, descriptor and
-/// matching (16 keypoints against 1 on the same frame class: +3.3 M; 0.24 M fits the set's
-/// terrain frames).
-pub const PER_KEYPOINT: u32 = 240_000;
+/// Per frame keypoint kept: sub-pixel refinement in the detector, orientation and descriptor
+/// (16 keypoints against 1 on the same frame class: +3.3 M with matching against the HIL
+/// tile's 388 features; orientation and descriptor 0.13 M a keypoint in the profile).
+pub const PER_KEYPOINT: u32 = 180_000;
+/// Matching, per frame feature and tile candidate (SSD with early exit, ratio and mutual
+/// checks: 0.79 M for 16 × 388 in the HIL profile).
+pub const MATCH_PER_PAIR: u32 = 130;
+/// Per frame feature and tile feature scanned without a descriptor comparison (the prior
+/// footprint's and the guided matching's position tests).
+pub const SCAN_PER_PAIR: u32 = 15;
 /// MSAC per sample drawn (the minimal solve, `f64`, software on the M4).
 pub const MSAC_PER_SAMPLE: u32 = 700;
 /// MSAC per correspondence scored per sample (`f32`).
@@ -93,27 +97,22 @@ pub const fn fixed_first_stage(
     }
 }
 
+/// Work of matching `features` frame features against a tile of `tile_len` features of which
+/// `candidates` lie in the prior's footprint (all, without a prior).
+pub const fn matching(features: usize, tile_len: usize, candidates: usize) -> u32 {
+    mul(SCAN_PER_PAIR, features.saturating_mul(tile_len))
+        .saturating_add(mul(MATCH_PER_PAIR, features.saturating_mul(candidates)))
+}
+
+/// Work of guided matching of `features` frame features against a tile of `tile_len` features
+/// (a position test each; the few descriptor comparisons near the prediction ride along).
+pub const fn guided_matching(features: usize, tile_len: usize) -> u32 {
+    mul(SCAN_PER_PAIR, features.saturating_mul(tile_len))
+}
+
 /// Work of one MSAC sample over `matches` correspondences.
 pub const fn msac_sample(matches: usize) -> u32 {
     MSAC_PER_SAMPLE.saturating_add(mul(MSAC_PER_POINT, matches))
-}
-
-/// Samples MSAC draws on `matches` correspondences that agree on nothing: its adaptive stop at
-/// a best consensus of 2, within the sample cap (what a failed consensus is charged: MSAC does
-/// not return its count then).
-pub fn msac_samples_without_consensus(matches: usize, cfg: &MsacConfig) -> u32 {
-    if matches < 3 {
-        return 0;
-    }
-    let w = 2.0 / matches as f64;
-    let need = libm::log(1.0 - cfg.confidence as f64) / libm::log(1.0 - w * w);
-    let need = if need.is_finite() && need >= 1.0 {
-        libm::ceil(need)
-    } else {
-        1.0
-    };
-    // `as` saturates; the cap bounds it anyway.
-    (need as u32).min(cfg.max_iterations as u32)
 }
 
 /// Coarse lattice cells of the area search at its widest.
@@ -160,9 +159,9 @@ mod tests {
 
     #[test]
     fn flight_frames_fixed_stage_fits_the_budget() {
-        // A 200 × 200 frame binned by 2: slope 5.6 M with a prior, 16.0 M lost in space.
+        // A 200 × 200 frame binned by 2: slope 5.6 M with a prior, 15.1 M lost in space.
         assert_eq!(fixed_first_stage(100 * 100, false, 16), 5_600_000);
-        assert_eq!(fixed_first_stage(100 * 100, true, 16), 16_040_000);
+        assert_eq!(fixed_first_stage(100 * 100, true, 16), 15_080_000);
         assert!(fixed_first_stage(100 * 100, true, 16) < FLIGHT_BUDGET);
     }
 
@@ -170,14 +169,5 @@ mod tests {
     fn saturates_instead_of_wrapping() {
         assert_eq!(slope(usize::MAX), u32::MAX);
         assert_eq!(refine(u32::MAX), u32::MAX);
-    }
-
-    #[test]
-    fn msac_without_consensus_is_capped() {
-        let cfg = MsacConfig::default();
-        assert_eq!(msac_samples_without_consensus(2, &cfg), 0);
-        let few = msac_samples_without_consensus(4, &cfg);
-        let many = msac_samples_without_consensus(128, &cfg);
-        assert!(few >= 1 && few <= many && many <= cfg.max_iterations as u32);
     }
 }

@@ -347,6 +347,18 @@ fn least_squares(pts: &[Correspondence], inlier: &[bool]) -> Option<(Affine, [[f
 /// Run MSAC on `pts`, writing the final inlier flags into `inlier` (same length as `pts`, at
 /// least). Returns `None` when no non-degenerate sample exists or fewer than 3 inliers remain.
 pub fn msac(pts: &[Correspondence], inlier: &mut [bool], cfg: &MsacConfig) -> Option<MsacResult> {
+    msac_counted(pts, inlier, cfg, &mut 0)
+}
+
+/// [`msac`], writing into `drawn` the samples it drew (degenerate ones included), whatever the
+/// result: what the navigator charges the frame's work budget.
+pub fn msac_counted(
+    pts: &[Correspondence],
+    inlier: &mut [bool],
+    cfg: &MsacConfig,
+    drawn: &mut u16,
+) -> Option<MsacResult> {
+    *drawn = 0;
     let n = pts.len().min(inlier.len());
     let pts = pts.get(..n)?;
     let inlier = inlier.get_mut(..n)?;
@@ -365,6 +377,7 @@ pub fn msac(pts: &[Correspondence], inlier: &mut [bool], cfg: &MsacConfig) -> Op
             break;
         }
         iterations += 1;
+        *drawn = iterations;
         let i = rng.below(n as u32) as usize;
         let mut j = rng.below(n as u32 - 1) as usize;
         if j >= i {

@@ -4,7 +4,7 @@
 use crate::cost;
 use crate::frame::{DemPatch, FrameError, SlopeBuffer, SlopeImage};
 use crate::matching::{Match, MatchConfig, MatchStats, match_features};
-use crate::msac::{Affine, Correspondence, MsacConfig, msac};
+use crate::msac::{Affine, Correspondence, MsacConfig, msac_counted};
 use crate::pose::{Fix, GateConfig, NoFix, make_fix};
 use crate::refine::{FrameInfo, RefineConfig, RefineError, Refined, refine_metered};
 use crate::search::{SearchConfig, SearchError, SearchHit, search_metered};
@@ -193,7 +193,9 @@ pub struct FrameReport {
     /// pass of each weighing [`crate::refine::SANDWICH_PASS_WEIGHT`].
     pub refine_sample_passes: u32,
     /// The dense refinement of the fix: `None` when there was no feature fix to refine,
-    /// otherwise what it gave or why it was not applied (the fix then stands unrefined).
+    /// otherwise what it gave or why it was not applied (the fix then stands unrefined, unless
+    /// the refinement contradicted it, a thin consensus went unconfirmed or the budget stopped
+    /// the refinement: see `outcome`).
     pub refine: Option<Result<Refined, RefineError>>,
     /// The feature consensus alone failed the gate (fewer than [`GateConfig::min_inliers`]
     /// inliers but at least [`GateConfig::min_inliers_verified`], or clustered inliers): the
@@ -412,9 +414,14 @@ impl<'t> Navigator<'t> {
                 ws.inlier.fill(false);
                 return Ok(first);
             }
-            // The feature path's detection and a whole keypoint budget must fit in what the
-            // search left, or the frame ends here.
-            let need = cost::detection(binned_px).saturating_add(cost::keypoints(K));
+            // The feature path's detection, a whole keypoint budget and their matching must
+            // fit in what the search left, or the frame ends here.
+            let n_tile = self.tile.len();
+            let in_reach = self.footprint(prior, w, h);
+            let candidates = (0..n_tile).filter(|&j| in_reach(j)).count();
+            let need = cost::detection(binned_px)
+                .saturating_add(cost::keypoints(K))
+                .saturating_add(cost::matching(K, n_tile, candidates));
             if need > self.room(&first) {
                 ws.features.clear();
                 ws.matches.clear();
@@ -735,8 +742,10 @@ impl<'t> Navigator<'t> {
         };
         // The whole lattice and a hit's shortest refinement (a step and its final pass) must
         // fit in what is left.
-        let need = cost::search_worst()
-            .saturating_add(cost::refine_pass(rcfg.max_samples).saturating_mul(2));
+        let need = cost::search_worst().saturating_add(
+            cost::refine_pass(rcfg.max_samples)
+                .saturating_mul(1 + crate::refine::SANDWICH_PASS_WEIGHT),
+        );
         if need > self.room(report) {
             report.search = Some(Err(SearchError::OverBudget));
             report.over_budget = true;
@@ -786,22 +795,24 @@ impl<'t> Navigator<'t> {
     }
 
     /// Fill the correspondences from the match list and run MSAC on them, with at most the
-    /// samples the rest of `report`'s budget pays for (charged to it). `Err(())`: not one
-    /// sample fits.
+    /// samples the rest of `report`'s budget pays for once `reserve` is set aside (charged to
+    /// it). `None`: not one sample fits. Otherwise MSAC's result, and whether the lowered
+    /// sample cap bound (MSAC drew up to it; the report is marked then).
     fn consensus<const P: usize, const W: usize, const K: usize, const M: usize>(
         &self,
         ws: &mut NavWorkspace<P, W, K, M>,
         report: &mut FrameReport,
-    ) -> Result<Option<crate::msac::MsacResult>, ()> {
+        reserve: u32,
+    ) -> Option<(Option<crate::msac::MsacResult>, bool)> {
         let n = ws.matches.len();
         let per_sample = cost::msac_sample(n).max(1);
-        let affordable = self.room(report) / per_sample;
+        let affordable = self.room(report).saturating_sub(reserve) / per_sample;
         let mut mcfg = self.cfg.msac;
         let capped = affordable < mcfg.max_iterations as u32;
         if capped {
             if affordable == 0 {
                 report.over_budget = true;
-                return Err(());
+                return None;
             }
             mcfg.max_iterations = affordable as u16;
         }
@@ -818,20 +829,49 @@ impl<'t> Navigator<'t> {
                 };
             }
         }
-        let Some(pts) = ws.pts.get(..n) else {
-            return Ok(None);
-        };
-        let r = msac(pts, &mut ws.inlier, &mcfg);
-        let samples = match &r {
-            Some(r) => r.iterations as u32,
-            None => cost::msac_samples_without_consensus(n, &mcfg),
-        };
-        report.charge(samples.saturating_mul(per_sample));
-        // The lowered cap bound only if MSAC drew up to it.
-        if capped && samples >= mcfg.max_iterations as u32 {
-            report.over_budget = true;
+        let pts = ws.pts.get(..n).unwrap_or(&[]);
+        let mut drawn = 0u16;
+        let r = msac_counted(pts, &mut ws.inlier, &mcfg, &mut drawn);
+        report.charge(u32::from(drawn).saturating_mul(per_sample));
+        let bound = capped && drawn >= mcfg.max_iterations;
+        report.over_budget |= bound;
+        Some((r, bound))
+    }
+
+    /// Whether tile feature `j` may match a `frame_w × frame_h` frame under `prior`: every
+    /// feature without one; with one, those within the frame's predicted half-diagonal (at the
+    /// largest plausible scale) plus 3σ of position.
+    fn footprint(
+        &self,
+        prior: Option<&Prior>,
+        frame_w: usize,
+        frame_h: usize,
+    ) -> impl Fn(usize) -> bool + '_ {
+        let footprint = prior.map(|p| {
+            let half_diag = 0.5 * libm::hypotf(frame_w as f32, frame_h as f32);
+            let scale_hi = p.scale + 3.0 * p.scale_sigma.abs();
+            let r = half_diag * scale_hi + 3.0 * p.sigma_px.abs();
+            (p.center_tile_px, r * r)
+        });
+        move |j: usize| match footprint {
+            None => true,
+            Some(([cx, cy], r2)) => {
+                let (kx, ky) = self.tile.position_px(j);
+                let (dx, dy) = (kx - cx, ky - cy);
+                dx * dx + dy * dy <= r2
+            }
         }
-        Ok(r)
+    }
+
+    /// Work set aside for the shortest refinement of a feature fix (a step and its final
+    /// pass), when the frame will be refined.
+    fn refine_reserve(&self) -> u32 {
+        if self.cfg.refine.enabled && self.tile.slope_raster().is_some() {
+            cost::refine_pass(self.cfg.refine.max_samples)
+                .saturating_mul(1 + crate::refine::SANDWICH_PASS_WEIGHT)
+        } else {
+            0
+        }
     }
 
     /// Replace the match list by guided matches under `affine`; false if too few were found.
@@ -912,24 +952,22 @@ impl<'t> Navigator<'t> {
             return report;
         }
         let tile = &self.tile;
-        // Prior footprint: tile features within the frame's predicted half-diagonal (at the
-        // largest plausible scale) plus 3σ of position.
-        let footprint = prior.map(|p| {
-            let half_diag = 0.5 * libm::hypotf(frame_w as f32, frame_h as f32);
-            let scale_hi = p.scale + 3.0 * p.scale_sigma.abs();
-            let r = half_diag * scale_hi + 3.0 * p.sigma_px.abs();
-            (p.center_tile_px, r * r)
-        });
-        let use_tile = |j: usize| match footprint {
-            None => true,
-            Some(([cx, cy], r2)) => {
-                let (kx, ky) = tile.position_px(j);
-                let (dx, dy) = (kx - cx, ky - cy);
-                dx * dx + dy * dy <= r2
-            }
-        };
+        let use_tile = self.footprint(prior, frame_w, frame_h);
+        // Matching (over the tile features in the prior's footprint) must fit.
+        let n_tile = tile.len();
+        let candidates = (0..n_tile).filter(|&j| use_tile(j)).count();
+        if cost::matching(feats.len(), n_tile, candidates) > self.room(&report) {
+            report.outcome = Err(NoFix::OverBudget);
+            report.over_budget = true;
+            return report;
+        }
         report.match_stats =
             match_features(feats, tile, &self.cfg.matching, use_tile, &mut ws.matches);
+        report.charge(cost::matching(
+            feats.len(),
+            n_tile,
+            report.match_stats.tile_candidates as usize,
+        ));
         // Orientation gate from the prior heading: a true match's orientations differ by the heading.
         let upright = tile.header().upright;
         if let Some(p) = prior
@@ -951,32 +989,48 @@ impl<'t> Navigator<'t> {
             report.outcome = Err(NoFix::TooFewMatches);
             return report;
         }
-        let mut r = match self.consensus(ws, &mut report) {
-            Ok(Some(r)) => r,
-            Ok(None) => {
+        // MSAC leaves room for the shortest refinement: a fix the budget cannot check does
+        // not stand anyway.
+        let reserve = self.refine_reserve();
+        let mut r = match self.consensus(ws, &mut report, reserve) {
+            Some((Some(r), _)) => r,
+            Some((None, false)) => {
                 report.outcome = Err(NoFix::TooFewInliers);
                 return report;
             }
-            Err(()) => {
+            Some((None, true)) | None => {
                 report.outcome = Err(NoFix::OverBudget);
                 return report;
             }
         };
-        if self.cfg.guided_radius_px > 0.0 && self.guided_matches(ws, &r.affine) {
-            match self.consensus(ws, &mut report) {
-                Ok(Some(g)) if g.inliers >= r.inliers => r = g,
-                Err(()) => {
-                    report.outcome = Err(NoFix::OverBudget);
-                    return report;
+        // Guided matching runs only if it and a whole second MSAC fit (its list has at most
+        // one match per frame feature); otherwise the first consensus stands.
+        let n_feat = ws.features.len();
+        let guided_need = cost::guided_matching(n_feat, n_tile)
+            .saturating_add(
+                cost::msac_sample(n_feat).saturating_mul(u32::from(self.cfg.msac.max_iterations)),
+            )
+            .saturating_add(reserve);
+        let guided_fits = guided_need <= self.room(&report);
+        if self.cfg.guided_radius_px > 0.0 && !guided_fits {
+            report.over_budget = true;
+        }
+        if self.cfg.guided_radius_px > 0.0 && guided_fits {
+            let guided = self.guided_matches(ws, &r.affine);
+            report.charge(cost::guided_matching(n_feat, n_tile));
+            if guided {
+                match self.consensus(ws, &mut report, reserve) {
+                    Some((Some(g), _)) if g.inliers >= r.inliers => r = g,
+                    // Cannot happen in practice (the first inliers are among the guided
+                    // candidates, and the whole second MSAC fits); if it does, the frame is
+                    // inconsistent and no fix is the safe answer.
+                    _ => {
+                        report.outcome = Err(NoFix::TooFewInliers);
+                        return report;
+                    }
                 }
-                // Cannot happen in practice (the first inliers are among the guided candidates);
-                // if it does, the frame is inconsistent and no fix is the safe answer.
-                _ => {
-                    report.outcome = Err(NoFix::TooFewInliers);
-                    return report;
-                }
+                report.matches = ws.matches.len() as u16;
             }
-            report.matches = ws.matches.len() as u16;
         }
         let n = ws.matches.len();
         let pts = ws.pts.get(..n).unwrap_or(&[]);

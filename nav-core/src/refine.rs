@@ -132,7 +132,7 @@ pub enum RefineError {
     /// The refined alignment correlates worse than the feature fix (by more than
     /// [`NCC_TOLERANCE`]) or less than [`RefineConfig::min_ncc`].
     WorseCorrelation,
-    /// Stopped (or not started) before converging: its next pass did not fit in
+    /// Stopped (or not started): its next pass, the final one included, did not fit in
     /// [`RefineConfig::max_sample_passes`] (the frame's work budget).
     OverBudget,
 }
@@ -637,6 +637,10 @@ pub fn refine_metered(
             huber,
             sandwich: converged || done >= iters,
         };
+        // Out of updates without converging: the final pass could not change the verdict.
+        if !converged && done >= iters && done > 0 {
+            return Err(RefineError::NotConverged);
+        }
         let weight = if model.sandwich {
             SANDWICH_PASS_WEIGHT
         } else {

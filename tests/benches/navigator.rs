@@ -51,7 +51,15 @@ fn bench_navigator(c: &mut Criterion) {
     let tile_bytes =
         build_tile(&img, &grid, &cfg, 512, smoothing_m, [0.0; 2]).unwrap_or_else(|e| panic!("{e}"));
     let tile = Tile::parse(&tile_bytes).unwrap_or_else(|e| panic!("{e}"));
-    let nav = Navigator::new(tile, NavConfig::default());
+    // A 256-keypoint host workspace: without the flyer's per-frame work budget, which its
+    // keypoints alone would pass (nav_core::cost).
+    let nav = Navigator::new(
+        tile,
+        NavConfig {
+            work_budget: u32::MAX,
+            ..NavConfig::default()
+        },
+    );
     let pose = FramePose {
         x_m: 150.0,
         y_m: -200.0,

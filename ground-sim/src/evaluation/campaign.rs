@@ -205,7 +205,8 @@ pub fn fly_posed(
     .map_err(|e| anyhow!("{e}"))?;
     let mut s = score(nav.tile(), &run, pose, frame.width, frame.height);
     s.m4_instructions_est = Some(u64::from(run.report.work));
-    s.budget_cut = Some(run.report.over_budget);
+    // The host budget runs without a work budget: nothing to cut, the column stays empty.
+    s.budget_cut = (spec.budget == Budget::Flight).then_some(run.report.over_budget);
     Ok(s)
 }
 
@@ -268,8 +269,8 @@ pub struct EvalSummary {
     pub m4_instructions_p95: f64,
     /// Fraction of all frames whose work exceeds the flyer's budget
     /// (`nav_core::cost::FLIGHT_BUDGET`, 20 M): frames that would overrun on the target (none
-    /// with the flight configuration, whose work budget bounds every frame; a navigator
-    /// without one, `--budget host`, shows them).
+    /// with the flight configuration on frames binned by 2 or more, whose work budget bounds
+    /// every stage after the first; a navigator without one, `--budget host`, shows them).
     pub over_budget_frac: f64,
     /// The same among the fixes.
     pub fixes_over_budget_frac: f64,

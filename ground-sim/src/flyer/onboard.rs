@@ -306,7 +306,15 @@ impl MapNav<'_> {
                 let mut src = *atlas;
                 let r = match ws {
                     Workspace::Flight(ws) => nav.locate_dem(&mut src, ws.as_mut(), &dem, prior),
-                    Workspace::Host(ws) => nav.locate_dem(&mut src, ws.as_mut(), &dem, prior),
+                    Workspace::Host(ws) => {
+                        let cfg = nav.config();
+                        let host =
+                            nav_core::atlas::AtlasNavigator::new(nav_core::atlas::AtlasConfig {
+                                nav: unbounded(&cfg.nav),
+                                ..*cfg
+                            });
+                        host.locate_dem(&mut src, ws.as_mut(), &dem, prior)
+                    }
                 }
                 .map_err(|e| anyhow::anyhow!("atlas navigator: {e}"))?;
                 Ok(MapFrame {

@@ -122,8 +122,9 @@ pub struct FrameRecord {
     pub atlas_tile: Option<u16>,
     /// Atlas frames: tiles located on.
     pub atlas_tried: Option<u8>,
-    /// TRN frames on the tile: the ground's cost model's estimate of this frame's
-    /// instructions (`FrameReport::work`, `nav_core::cost`), to compare with `instructions`.
+    /// TRN frames (on the tile or the atlas): the work the navigator metered for the frame
+    /// (`FrameReport::work`, estimated instructions, `nav_core::cost`), to compare with
+    /// `instructions`.
     pub estimated_instructions: Option<u64>,
 }
 
