@@ -404,6 +404,16 @@ pub fn print_summary(s: &EvalSummary) {
         s.fixes_over_budget_frac * 100.0,
         s.budget_cut_frac * 100.0
     );
+    if s.budget_cut_frac > 0.25 && s.prior.is_none() {
+        // Lost in space, every tile feature is a matching candidate: on a large tile that alone
+        // can exhaust the flyer's budget (docs/bounds.md, the per-frame work budget).
+        println!(
+            "            most frames ran out of the flyer's work budget: lost in space, matching \
+             reads every tile feature; the flyer's atlas tiles cover 4 km, a prior \
+             (--prior-sigma-m) restricts matching to its footprint, --budget host measures \
+             without a budget"
+        );
+    }
     println!(
         "position    p50 {:.2} m  p95 {:.2} m  max {:.2} m",
         s.pos_err_p50_m, s.pos_err_p95_m, s.pos_err_max_m
