@@ -855,24 +855,25 @@ impl AtlasNavigator {
     /// Locate a DEM frame on the atlas under `prior` (atlas pixels; a prior is required: it is
     /// what picks the tile).
     ///
-    /// The frame is extracted once. On the deepest tile its feature path runs (matching,
-    /// consensus, refinement, prior gate: [`Navigator::locate_dem`] without the area search).
-    /// When that gives no fix:
+    /// A frame that lies wholly inside the deepest tile (at the prior's centre) is located on
+    /// it exactly as on a single tile ([`Navigator::locate_dem`]: with the prior, the area
+    /// search first, [`crate::NavConfig::search_first`]); no neighbour could help it. A frame
+    /// that hangs over the tile's edge may need a neighbour, which needs its features: it is
+    /// extracted once, and on the deepest tile its feature path runs (matching, consensus,
+    /// refinement, prior gate: [`Navigator::locate_dem`] without the area search). When that
+    /// gives no fix:
     ///
-    /// * if the frame, at the prior's centre, lies wholly inside that tile, the tile's area
-    ///   search runs, exactly as on a single tile (the prior's 3σ may cross the tile edge, but
-    ///   the search looks near the centre only);
-    /// * otherwise the frame hangs over the tile's edge: when it has at least the gate's
-    ///   `min_matches` features (fewer fix on no tile by features) and its failure was cheap
-    ///   (no dense refinement ran), the next candidates' feature paths follow, up to
-    ///   `max_tiles_per_frame` tiles in all, first fix taken; else the deepest tile's area
-    ///   search runs.
+    /// * when it has at least the gate's `min_matches` features (fewer fix on no tile by
+    ///   features) and its failure was cheap (no dense refinement ran), the next candidates'
+    ///   feature paths follow on the same extraction, up to `max_tiles_per_frame` tiles in
+    ///   all, first fix taken;
+    /// * else the deepest tile's area search runs.
     ///
-    /// A frame's work is one extraction, the feature paths, and at most one expensive stage (one
-    /// consensus's refinement, or the area search, never both neighbours and the search), as on
-    /// a single tile; the extra is the cheap failures' matching and consensus (docs/bounds.md).
-    /// A frame that needs one tile only gives bit for bit what [`Navigator::locate_dem`] gives
-    /// with [`crate::NavConfig::search_first`] off: the atlas keeps the feature path first.
+    /// (The search first for such frames too cost the HIL set's coast frame its fix: the search
+    /// on the deepest tile, which the frame mostly leaves, spent the budget its neighbour's
+    /// features needed.) The frame's work is carried over the tiles tried and bounded by the
+    /// navigator's work budget ([`crate::NavConfig::work_budget`]): a neighbour's matching,
+    /// consensus and refinement, or the search, run only where they fit (docs/bounds.md).
     /// Afterwards the workspace's matches and inlier flags are those of the last tile tried
     /// (which may not be the tile of the returned report).
     pub fn locate_dem<
@@ -907,24 +908,31 @@ impl AtlasNavigator {
             .entry(first as usize)
             .ok_or(AtlasError::NoSuchTile { index: first })?;
         let tp = e.tile_prior(prior);
+        let hangs_over = candidates.depth_px[0] < candidates.half_diag_px;
         let (k, mut report, neighbours) = {
             let nav = Navigator::new(source.tile(first)?, self.cfg.nav);
             let k = nav.bin_factor(dem.pixel_m());
-            nav.extract_dem(ws, dem, k)?;
-            let spent = nav.extraction_work(ws);
-            let mut report = nav.locate_extracted_dem(ws, (w, h), k, Some(&tp), false, spent)?;
-            let hangs_over = candidates.depth_px[0] < candidates.half_diag_px;
-            let neighbours = report.outcome.is_err()
-                && candidates.straddles
-                && hangs_over
-                && candidates.count > 1
-                && budget > 1
-                && report.features >= self.cfg.nav.gate.min_matches
-                && report.refine.is_none();
-            if report.outcome.is_err() && !neighbours {
-                nav.area_search_extracted(ws, &mut report, w, h, k, Some(&tp))?;
+            if !hangs_over {
+                // Wholly inside the deepest tile: no neighbour can help, so exactly the single
+                // tile's path (with the prior, the area search first when so configured).
+                (k, nav.locate_dem(ws, dem, Some(&tp))?, false)
+            } else {
+                // Over its edge: the features first, which a neighbour may need.
+                nav.extract_dem(ws, dem, k)?;
+                let spent = nav.extraction_work(ws);
+                let mut report =
+                    nav.locate_extracted_dem(ws, (w, h), k, Some(&tp), false, spent)?;
+                let neighbours = report.outcome.is_err()
+                    && candidates.straddles
+                    && candidates.count > 1
+                    && budget > 1
+                    && report.features >= self.cfg.nav.gate.min_matches
+                    && report.refine.is_none();
+                if report.outcome.is_err() && !neighbours {
+                    nav.area_search_extracted(ws, &mut report, w, h, k, Some(&tp))?;
+                }
+                (k, report, neighbours)
             }
-            (k, report, neighbours)
         };
         out.tried = 1;
         out.tile = Some(first);

@@ -48,6 +48,10 @@ pub const MSAC_PER_SAMPLE: u32 = 700;
 pub const MSAC_PER_POINT: u32 = 30;
 /// Area search per coarse lattice cell (49 samples, ≈ 28 instructions each).
 pub const SEARCH_PER_COARSE_CELL: u32 = 1_400;
+/// Area search, more per coarse cell whose pattern reaches past the raster's edge (2-D bounds
+/// checks per sample; session 29, the atlas frames near tile edges: 0.2–0.6 M for 350–1 215
+/// such cells).
+pub const SEARCH_PER_EDGE_CELL: u32 = 550;
 /// Area search: the fine level's frame samples, the winner's coarse climb and fine lattice
 /// (`stress-noise-prior`, whose search stops at the winner's fine gate: ≈ 1 M).
 pub const SEARCH_FINE_WINNER: u32 = 1_000_000;
@@ -126,12 +130,15 @@ pub const fn search_full_lattice() -> u32 {
 /// Worst-case work of the area search itself (its whole coarse lattice and fine level with
 /// every runner).
 pub const fn search_worst() -> u32 {
-    mul(SEARCH_PER_COARSE_CELL, search_full_lattice() as usize)
-        .saturating_add(SEARCH_FINE_WINNER)
-        .saturating_add(mul(
-            SEARCH_PER_RUNNER,
-            crate::search::MAX_CANDIDATES.saturating_sub(1),
-        ))
+    mul(
+        SEARCH_PER_COARSE_CELL + SEARCH_PER_EDGE_CELL,
+        search_full_lattice() as usize,
+    )
+    .saturating_add(SEARCH_FINE_WINNER)
+    .saturating_add(mul(
+        SEARCH_PER_RUNNER,
+        crate::search::MAX_CANDIDATES.saturating_sub(1),
+    ))
 }
 
 /// Work of one refinement pass of `samples` samples.

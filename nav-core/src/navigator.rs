@@ -119,7 +119,10 @@ impl Default for NavConfig {
 /// Work of what an area search ran: its coarse cells and, if it got there, its fine level and
 /// runners.
 fn search_work(w: &crate::search::SearchWork) -> u32 {
-    let coarse = w.coarse_cells.saturating_mul(cost::SEARCH_PER_COARSE_CELL);
+    let coarse = w
+        .coarse_cells
+        .saturating_mul(cost::SEARCH_PER_COARSE_CELL)
+        .saturating_add(w.edge_cells.saturating_mul(cost::SEARCH_PER_EDGE_CELL));
     if w.fine {
         coarse
             .saturating_add(cost::SEARCH_FINE_WINNER)
@@ -206,6 +209,8 @@ pub struct FrameReport {
     /// found none. Its fix, if any,
     /// is the outcome (with [`Fix::area_search`] set).
     pub search: Option<Result<SearchHit, SearchError>>,
+    /// What the area search ran in this frame (zero when it did not run).
+    pub search_work: crate::search::SearchWork,
     /// Work this frame spent, [`crate::cost`] units (estimated Cortex-M4 instructions; upper-
     /// leaning where the navigator cannot see: a failed MSAC is charged its adaptive stop on
     /// matches that agree on nothing).
@@ -234,6 +239,7 @@ impl FrameReport {
             refine: None,
             needed_confirmation: false,
             search: None,
+            search_work: crate::search::SearchWork::default(),
             work: 0,
             over_budget: false,
         }
@@ -438,6 +444,7 @@ impl<'t> Navigator<'t> {
             let mut report = self.locate_extracted_dem(ws, (w, h), k, prior, false, spent)?;
             // The search's verdict stays in the report (it ran, and why it gave nothing).
             report.search = first.search;
+            report.search_work = first.search_work;
             report.search_first = true;
             report.over_budget |= first.over_budget;
             report.refine_sample_passes = report
@@ -754,6 +761,7 @@ impl<'t> Navigator<'t> {
         let mut work = crate::search::SearchWork::default();
         let hit = search_metered(img, k, raster, p, &self.cfg.search, &mut work);
         report.search = Some(hit);
+        report.search_work = work;
         report.charge(search_work(&work));
         let Ok(hit) = hit else { return };
         // A refused hit leaves the refinement's verdict in the report (why no fix).

@@ -302,6 +302,12 @@ fn frame_samples<const S: usize>(
 }
 
 /// Correlation of `samples` with the raster under candidate `c`.
+/// [`correlate`], counting the samples read into `reads`.
+fn correlate_counted(samples: &[Sample], r: &SlopeRaster<'_>, c: &Cand, reads: &mut u32) -> Corr {
+    *reads = reads.saturating_add(samples.len() as u32);
+    correlate(samples, r, c)
+}
+
 fn correlate(samples: &[Sample], r: &SlopeRaster<'_>, c: &Cand) -> Corr {
     let (sn, cs) = (libm::sinf(c.heading), libm::cosf(c.heading));
     let (a, b) = (c.scale * cs, c.scale * sn);
@@ -327,13 +333,20 @@ fn steps(half: f32, step: f32, max: usize) -> (i32, f32) {
 
 /// What a search ran, whatever its result (what the navigator charges the frame's work budget).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct SearchWork {
     /// Coarse lattice cells correlated.
     pub coarse_cells: u32,
+    /// Of those, cells whose sample pattern reached past the raster's edge (read with 2-D
+    /// bounds checks, about twice the work of an inner cell).
+    pub edge_cells: u32,
     /// The fine level ran (the winner's coarse climb and fine lattice).
     pub fine: bool,
     /// Runners searched on the fine level (each: its fine lattice, climb and valley path).
     pub runners: u8,
+    /// Frame samples correlated after the coarse lattice (the winner's coarse climb, the fine
+    /// lattices, climbs and valley paths): what the fine level's work varies with.
+    pub fine_reads: u32,
 }
 
 /// Search the prior's window for the frame `img` (binned by `bin` from the frame's pixel grid)
@@ -449,6 +462,7 @@ pub fn search_metered(
                             }
                         }
                     } else {
+                        work.edge_cells = work.edge_cells.saturating_add(1);
                         for (&(oc, or), s) in at.iter().zip(coarse) {
                             if let Some(t) = raw(raster, oc + sx, or + sy) {
                                 k.add(s.f, t);
@@ -495,13 +509,20 @@ pub fn search_metered(
     // ambiguity.
     let need = need.max(8);
     work.fine = true;
-    let (top, _) = climb(coarse, raster, top, need);
+    let (top, _) = climb(coarse, raster, top, need, &mut work.fine_reads);
     // Fine level around the winner: ±1 px, half steps in heading and scale.
     let mut fine = [Sample::default(); FINE_GRID * FINE_GRID];
     let nf = frame_samples(img, FINE_GRID, &mut fine);
     let fine = fine.get(..nf).unwrap_or(&[]);
     let need_fine = ((cfg.min_valid_fraction * nf as f32) as u32).max(8);
-    let winner = fine_peak(fine, raster, top, (dh, ds, ns), need_fine);
+    let winner = fine_peak(
+        fine,
+        raster,
+        top,
+        (dh, ds, ns),
+        need_fine,
+        &mut work.fine_reads,
+    );
     if winner.ncc <= -1.0 {
         return Err(SearchError::NoCandidate);
     }
@@ -523,12 +544,26 @@ pub fn search_metered(
             continue;
         }
         work.runners = work.runners.saturating_add(1);
-        let start = fine_peak(fine, raster, *c, (dh, ds, ns), need_fine);
-        let (peak, settled) = climb(fine, raster, start, need_fine);
+        let start = fine_peak(
+            fine,
+            raster,
+            *c,
+            (dh, ds, ns),
+            need_fine,
+            &mut work.fine_reads,
+        );
+        let (peak, settled) = climb(fine, raster, start, need_fine, &mut work.fine_reads);
         if settled
             && libm::hypotf(peak.x - winner.x, peak.y - winner.y) > cfg.exclusion_px
             && (peak.ncc <= winner.ncc - cfg.min_margin
-                || valley(fine, raster, &winner, &peak, need_fine, cfg.min_margin))
+                || valley(
+                    fine,
+                    raster,
+                    (&winner, &peak),
+                    need_fine,
+                    cfg.min_margin,
+                    &mut work.fine_reads,
+                ))
         {
             runner = runner.max(peak.ncc);
         }
@@ -574,6 +609,7 @@ fn fine_peak(
     c: Cand,
     (dh, ds, ns): (f32, f32, i32),
     need: u32,
+    reads: &mut u32,
 ) -> Cand {
     let mut best = Cand { ncc: -2.0, ..c };
     for dh_i in -1..=1 {
@@ -590,7 +626,7 @@ fn fine_peak(
                         scale: c.scale * (1.0 + 0.5 * ds_i as f32 * ds),
                         ncc: 0.0,
                     };
-                    let k = correlate(fine, r, &t);
+                    let k = correlate_counted(fine, r, &t, reads);
                     if k.n < need {
                         continue;
                     }
@@ -623,7 +659,14 @@ const _: () = assert!(MAX_VALLEY_STEPS >= 2);
 /// A point with too few valid samples (a hole in the reference, the map's edge) counts as a
 /// dip: what lies between the two peaks is unknown, and calling them one peak would err
 /// towards a fix.
-fn valley(fine: &[Sample], r: &SlopeRaster<'_>, a: &Cand, b: &Cand, need: u32, depth: f32) -> bool {
+fn valley(
+    fine: &[Sample],
+    r: &SlopeRaster<'_>,
+    (a, b): (&Cand, &Cand),
+    need: u32,
+    depth: f32,
+    reads: &mut u32,
+) -> bool {
     let floor = a.ncc.min(b.ncc) - depth;
     let d = libm::hypotf(b.x - a.x, b.y - a.y);
     let n = (libm::ceilf(d) as usize).clamp(2, MAX_VALLEY_STEPS);
@@ -636,7 +679,7 @@ fn valley(fine: &[Sample], r: &SlopeRaster<'_>, a: &Cand, b: &Cand, need: u32, d
             scale: a.scale + f * (b.scale - a.scale),
             ncc: 0.0,
         };
-        let k = correlate(fine, r, &c);
+        let k = correlate_counted(fine, r, &c, reads);
         k.n < need || k.ncc() < floor
     })
 }
@@ -646,7 +689,13 @@ pub const CLIMB_STEPS: usize = 3;
 
 /// Climb from `c` to the best 8-neighbour (1 px) until none is better or the step budget ends;
 /// the flag says whether it settled on a local maximum.
-fn climb(samples: &[Sample], r: &SlopeRaster<'_>, mut c: Cand, need: u32) -> (Cand, bool) {
+fn climb(
+    samples: &[Sample],
+    r: &SlopeRaster<'_>,
+    mut c: Cand,
+    need: u32,
+    reads: &mut u32,
+) -> (Cand, bool) {
     for _ in 0..CLIMB_STEPS {
         let mut next = c;
         for dy in -1..=1 {
@@ -659,7 +708,7 @@ fn climb(samples: &[Sample], r: &SlopeRaster<'_>, mut c: Cand, need: u32) -> (Ca
                     y: c.y + dy as f32,
                     ..c
                 };
-                let k = correlate(samples, r, &t);
+                let k = correlate_counted(samples, r, &t, reads);
                 if k.n < need {
                     continue;
                 }
