@@ -9,9 +9,9 @@
 //! Cortex-M4 instructions ([`crate::FrameReport::work`]), and before each variable stage asks
 //! whether the stage's worst case still fits in [`crate::NavConfig::work_budget`]: a search that
 //! does not fit is skipped ([`crate::search::SearchError::OverBudget`]), a feature path after a
-//! failed search too ([`crate::NoFix::OverBudget`]), and MSAC and the refinements get at most the
-//! samples and passes the rest of the budget pays for ([`crate::FrameReport::over_budget`] says
-//! when a cap bound). A frame's work is then at most `max(budget, fixed)`, `fixed` being the
+//! failed search too ([`crate::NoFix::OverBudget`]), matching runs only where it fits, and MSAC
+//! and the refinements get at most the samples and passes the rest of the budget pays for
+//! ([`crate::FrameReport::over_budget`] says when a cap bound). A frame's work is then at most `max(budget, fixed)`, `fixed` being the
 //! stage every frame runs whatever the budget: slope, and on the feature path first its detection
 //! and keypoints ([`fixed_first_stage`]; 5.6 M or 15.1 M for a 200 × 200 frame binned by 2).
 //!

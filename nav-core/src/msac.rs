@@ -377,7 +377,6 @@ pub fn msac_counted(
             break;
         }
         iterations += 1;
-        *drawn = iterations;
         let i = rng.below(n as u32) as usize;
         let mut j = rng.below(n as u32 - 1) as usize;
         if j >= i {
@@ -442,6 +441,7 @@ pub fn msac_counted(
             }
         }
     }
+    *drawn = iterations;
     let (_, mut model, _) = best?;
     // Refine: least squares on the inliers, re-score with the refined model, repeat while the
     // inlier set changes (at most three rounds).

@@ -86,8 +86,8 @@ pub struct NavConfig {
     /// or higher, no false fix, docs/registration.md).
     pub search_first: bool,
     /// Work budget of one frame, in [`crate::cost`] units (estimated Cortex-M4 instructions):
-    /// before each variable stage (area search, a feature path after a failed search, MSAC,
-    /// each refinement) the navigator checks that the stage's worst case fits in what is left,
+    /// before each variable stage (area search, a feature path after a failed search,
+    /// matching, MSAC, guided matching, each refinement) the navigator checks that the stage's worst case fits in what is left,
     /// and skips it or caps its samples and passes to fit ([`FrameReport::over_budget`]). A
     /// frame's [`FrameReport::work`] is then at most the larger of this and its fixed first
     /// stage ([`crate::cost::fixed_first_stage`]). Default [`crate::cost::FLIGHT_BUDGET`]
@@ -211,9 +211,9 @@ pub struct FrameReport {
     pub search: Option<Result<SearchHit, SearchError>>,
     /// What the area search ran in this frame (zero when it did not run).
     pub search_work: crate::search::SearchWork,
-    /// Work this frame spent, [`crate::cost`] units (estimated Cortex-M4 instructions; upper-
-    /// leaning where the navigator cannot see: a failed MSAC is charged its adaptive stop on
-    /// matches that agree on nothing).
+    /// Work this frame spent, [`crate::cost`] units (estimated Cortex-M4 instructions, from
+    /// what each stage ran: pixels, keypoints, matching pairs, MSAC samples drawn, search
+    /// cells and fine reads, refinement samples per pass).
     pub work: u32,
     /// The work budget ([`NavConfig::work_budget`]) skipped a stage or capped a stage's
     /// samples or passes in this frame.
@@ -423,8 +423,7 @@ impl<'t> Navigator<'t> {
             // The feature path's detection, a whole keypoint budget and their matching must
             // fit in what the search left, or the frame ends here.
             let n_tile = self.tile.len();
-            let in_reach = self.footprint(prior, w, h);
-            let candidates = (0..n_tile).filter(|&j| in_reach(j)).count();
+            let candidates = self.candidates(prior, w, h);
             let need = cost::detection(binned_px)
                 .saturating_add(cost::keypoints(K))
                 .saturating_add(cost::matching(K, n_tile, candidates));
@@ -871,6 +870,13 @@ impl<'t> Navigator<'t> {
         }
     }
 
+    /// Tile features in the footprint of a `frame_w × frame_h` frame under `prior`
+    /// ([`Self::footprint`]): matching's candidates.
+    fn candidates(&self, prior: Option<&Prior>, frame_w: usize, frame_h: usize) -> usize {
+        let in_reach = self.footprint(prior, frame_w, frame_h);
+        (0..self.tile.len()).filter(|&j| in_reach(j)).count()
+    }
+
     /// Work set aside for the shortest refinement of a feature fix (a step and its final
     /// pass), when the frame will be refined.
     fn refine_reserve(&self) -> u32 {
@@ -963,7 +969,7 @@ impl<'t> Navigator<'t> {
         let use_tile = self.footprint(prior, frame_w, frame_h);
         // Matching (over the tile features in the prior's footprint) must fit.
         let n_tile = tile.len();
-        let candidates = (0..n_tile).filter(|&j| use_tile(j)).count();
+        let candidates = self.candidates(prior, frame_w, frame_h);
         if cost::matching(feats.len(), n_tile, candidates) > self.room(&report) {
             report.outcome = Err(NoFix::OverBudget);
             report.over_budget = true;

@@ -449,7 +449,6 @@ pub fn search_metered(
                 for ix in -np..=np {
                     let sx = ix * COARSE_STEP_PX;
                     cells += 1;
-                    work.coarse_cells = cells;
                     let mut k = Corr::default();
                     if c0 + sx >= 0 && c1 + sx < wr && r0 + sy >= 0 && r1 + sy < hr {
                         // The whole pattern lies inside the raster: linear indices, no 2-D
@@ -484,6 +483,7 @@ pub fn search_metered(
             }
         }
     }
+    work.coarse_cells = cells;
     let coarse_best = best.iter().fold(-2.0f32, |m, c| m.max(c.ncc));
     if coarse_best < -1.0 {
         return Err(SearchError::NoCandidate);
