@@ -3,11 +3,12 @@
 //! ```text
 //! cargo run --release -p hil-bridge -- gen
 //! cargo run --release -p hil-bridge -- run [--frames N] [--json OUT] [--budget INSNS]
+//! cargo run --release -p hil-bridge -- run --terrain plains   # the set cut from other ground
 //! ```
 
 use anyhow::{Result, bail};
 use clap::{Parser, Subcommand};
-use hil_bridge::host::frames::generate_set;
+use hil_bridge::host::frames::{SetTerrain, generate_set_on};
 use hil_bridge::host::runner::{INSTRUCTION_BUDGET, RunOptions, STATIC_RAM_BUDGET, run};
 use std::path::PathBuf;
 
@@ -28,6 +29,10 @@ enum Cmd {
         /// Terrain frames (five stress frames follow them).
         #[arg(long, default_value_t = 18)]
         terrain_frames: usize,
+        /// Terrain `PRESET[:WINDOW[:SEED]]` (e.g. `plains`, `fresh:rim`); another terrain than
+        /// the recorded set's is written to `target/hil/data-LABEL`.
+        #[arg(long, value_parser = SetTerrain::parse)]
+        terrain: Option<SetTerrain>,
     },
     /// Write a recorded host → target session (hello, the first N frames, shutdown) that the
     /// firmware can replay without a host: `cargo run` in `hil-bridge/firmware` does.
@@ -71,6 +76,11 @@ enum Cmd {
         /// Regenerate the frame set first.
         #[arg(long)]
         regen: bool,
+        /// Run the set cut from this terrain, `PRESET[:WINDOW[:SEED]]` (e.g. `plains`,
+        /// `fresh:rim`), generated into its own folder and linked into the firmware: checks the
+        /// counts and the work model on other ground than the recorded set's Shoemaker floor.
+        #[arg(long, value_parser = SetTerrain::parse)]
+        terrain: Option<SetTerrain>,
         /// Fail if any frame costs more instructions than this.
         #[arg(long, default_value_t = INSTRUCTION_BUDGET)]
         budget: u64,
@@ -87,9 +97,13 @@ fn root() -> PathBuf {
 fn main() -> Result<()> {
     let cli = Cli::parse();
     match cli.cmd {
-        Cmd::Gen { terrain_frames } => {
-            let opts = RunOptions::new(root());
-            let set = generate_set(terrain_frames)?;
+        Cmd::Gen {
+            terrain_frames,
+            terrain,
+        } => {
+            let mut opts = RunOptions::new(root());
+            opts.terrain = terrain.unwrap_or(SetTerrain::DEFAULT);
+            let set = generate_set_on(opts.terrain, terrain_frames)?;
             set.write(&opts.data_dir())?;
             eprintln!(
                 "wrote {} frames and a {}-byte tile to {}",
@@ -173,9 +187,11 @@ fn main() -> Result<()> {
             link,
             no_faults,
             regen,
+            terrain,
             budget,
         } => {
             let mut opts = RunOptions::new(root());
+            opts.terrain = terrain.unwrap_or(SetTerrain::DEFAULT);
             opts.frames = frames;
             opts.only = only;
             opts.machine = machine;

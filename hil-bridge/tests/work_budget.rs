@@ -30,6 +30,20 @@ fn no_frame_spends_more_than_its_budget_or_its_fixed_stage() {
         if w * h > flight::MAX_FRAME_PX {
             continue;
         }
+        // The smoothing's work over the frame's holes, as the navigator runs it.
+        let nodata_sums = {
+            let k = unbounded.bin_factor(f.meta.pixel_m);
+            let mut px = vec![nav_core::SLOPE_NODATA; w * h];
+            let sigma_px = unbounded.frame_smoothing_px(f.meta.pixel_m * k as f32);
+            nav_core::slope::slope_into_binned_smoothed_counted::<{ flight::MAX_FRAME_WIDTH }>(
+                &dem,
+                k,
+                sigma_px,
+                &mut px,
+                unbounded.config().fill_dropouts,
+            )
+            .map_or(0, |(_, n)| n)
+        };
         let own = f.meta.prior.as_ref().map(prior);
         // A prior 40 px off (σ as given, or 2.5 px): the search fails, the features follow.
         let off = own.map(|p| Prior {
@@ -51,6 +65,7 @@ fn no_frame_spends_more_than_its_budget_or_its_fixed_stage() {
                     (w / nav.bin_factor(f.meta.pixel_m)) * (h / nav.bin_factor(f.meta.pixel_m));
                 let fixed = cost::fixed_first_stage(
                     binned,
+                    nodata_sums,
                     !(p.is_some() && nav.config().search_first),
                     flight::MAX_KEYPOINTS,
                 );

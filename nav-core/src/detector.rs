@@ -362,6 +362,9 @@ pub const fn ring_len(width: usize) -> usize {
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct DetectStats {
+    /// Responses above the threshold, each tested for a strict 3×3×3 maximum (the detector's
+    /// terrain-dependent work: steep or rough ground has many more than gentle ground).
+    pub candidates: u32,
     /// Strict 3×3×3 maxima above the threshold, in the layers that can reach `min_scale_px`
     /// (layers that cannot are not searched at all).
     pub maxima: u32,
@@ -479,6 +482,7 @@ pub(crate) fn detect(
             let at = |layer: usize, gy: usize, gx: usize| {
                 ring.get(idx(layer, gy, gx)).copied().unwrap_or(0.0)
             };
+            let row_start = |layer: usize, gy: usize| idx(layer, gy, 0);
             for layer in 1..layers - 1 {
                 if !live(layer) {
                     continue;
@@ -489,13 +493,22 @@ pub(crate) fn detect(
                 if y < reach || y + reach >= h {
                     continue;
                 }
+                // The 3 × 3 × 3 neighbourhood's nine ring rows, found once per centre row (the
+                // same layer's first: a candidate that is no maximum most often has a larger
+                // neighbour there).
+                let rows = [layer, layer - 1, layer + 1]
+                    .map(|l| [cy - 1, cy, cy + 1].map(|yy| row_start(l, yy)));
                 for gx in 1..gw.saturating_sub(1) {
                     let x = gx * step;
                     if x < reach || x + reach >= w {
                         continue;
                     }
                     let v = at(layer, cy, gx);
-                    if v.is_nan() || v <= cfg.threshold || !strict_max(&at, layer, cy, gx, v) {
+                    if v.is_nan() || v <= cfg.threshold {
+                        continue;
+                    }
+                    stats.candidates += 1;
+                    if !strict_max(ring, &rows, gx, v) {
                         continue;
                     }
                     stats.maxima += 1;
@@ -519,18 +532,18 @@ pub(crate) fn detect(
     Ok(stats)
 }
 
+/// Whether `v`, the response at column `gx` of the middle row of `rows[0]`, is larger than all
+/// 26 neighbours: `rows` holds the ring offsets of the rows above, at and below the centre, for
+/// the centre's layer, the one below and the one above. A response outside the ring reads 0.
 #[inline]
-fn strict_max(
-    at: &impl Fn(usize, usize, usize) -> f32,
-    layer: usize,
-    cy: usize,
-    gx: usize,
-    v: f32,
-) -> bool {
-    for l in layer - 1..=layer + 1 {
-        for yy in cy - 1..=cy + 1 {
+fn strict_max(ring: &[f32], rows: &[[usize; 3]; 3], gx: usize, v: f32) -> bool {
+    for (li, layer_rows) in rows.iter().enumerate() {
+        for (yi, &start) in layer_rows.iter().enumerate() {
             for xx in gx - 1..=gx + 1 {
-                if (l, yy, xx) != (layer, cy, gx) && at(l, yy, xx) >= v {
+                if (li, yi, xx) == (0, 1, gx) {
+                    continue;
+                }
+                if ring.get(start + xx).copied().unwrap_or(0.0) >= v {
                     return false;
                 }
             }

@@ -267,6 +267,7 @@ pub struct SlopeBuffer<const MAX_PX: usize> {
     width: usize,
     height: usize,
     pixel_m: f32,
+    nodata_sums: u32,
 }
 
 impl<const MAX_PX: usize> Default for SlopeBuffer<MAX_PX> {
@@ -283,6 +284,7 @@ impl<const MAX_PX: usize> SlopeBuffer<MAX_PX> {
             width: 0,
             height: 0,
             pixel_m: 0.0,
+            nodata_sums: 0,
         }
     }
 
@@ -292,6 +294,7 @@ impl<const MAX_PX: usize> SlopeBuffer<MAX_PX> {
         self.width = img.width();
         self.height = img.height();
         self.pixel_m = img.pixel_m();
+        self.nodata_sums = 0;
         Ok(img)
     }
 
@@ -305,6 +308,7 @@ impl<const MAX_PX: usize> SlopeBuffer<MAX_PX> {
         self.width = img.width();
         self.height = img.height();
         self.pixel_m = img.pixel_m();
+        self.nodata_sums = 0;
         Ok(img)
     }
 
@@ -317,12 +321,24 @@ impl<const MAX_PX: usize> SlopeBuffer<MAX_PX> {
         sigma_px: f32,
         fill: bool,
     ) -> Result<SlopeImage<'_>, FrameError> {
-        let img =
-            crate::slope::slope_into_binned_smoothed::<CAP>(dem, k, sigma_px, &mut self.px, fill)?;
+        let (img, sums) = crate::slope::slope_into_binned_smoothed_counted::<CAP>(
+            dem,
+            k,
+            sigma_px,
+            &mut self.px,
+            fill,
+        )?;
         self.width = img.width();
         self.height = img.height();
         self.pixel_m = img.pixel_m();
+        self.nodata_sums = sums;
         Ok(img)
+    }
+
+    /// The last [`Self::compute_binned_smoothed`]'s smoothing work over missing heights (see
+    /// [`crate::slope::slope_into_binned_smoothed_counted`]; 0 after any other computation).
+    pub fn nodata_sums(&self) -> u32 {
+        self.nodata_sums
     }
 
     /// Slope of `dem` binned `k × k` (see [`crate::slope::slope_into_binned`]).
@@ -336,6 +352,7 @@ impl<const MAX_PX: usize> SlopeBuffer<MAX_PX> {
         self.width = img.width();
         self.height = img.height();
         self.pixel_m = img.pixel_m();
+        self.nodata_sums = 0;
         Ok(img)
     }
 
@@ -388,6 +405,7 @@ impl<const MAX_PX: usize> SlopeBuffer<MAX_PX> {
         self.width = w;
         self.height = h;
         self.pixel_m = img.pixel_m() * k as f32;
+        self.nodata_sums = 0;
         self.image()
     }
 

@@ -412,7 +412,9 @@ impl<'t> Navigator<'t> {
                 search_first: true,
                 ..FrameReport::nothing_yet()
             };
-            first.charge(cost::slope(binned_px));
+            first.charge(
+                cost::slope(binned_px).saturating_add(cost::slope_nodata(ws.slope.nodata_sums())),
+            );
             self.area_search(&mut first, &img, k, &info, (w, h), prior);
             if first.outcome.is_ok() {
                 ws.features.clear();
@@ -471,6 +473,7 @@ impl<'t> Navigator<'t> {
     ) -> u32 {
         let binned_px = ws.slope.image().map_or(0, |i| i.width() * i.height());
         cost::slope(binned_px)
+            .saturating_add(cost::slope_nodata(ws.slope.nodata_sums()))
             .saturating_add(cost::detection(binned_px))
             .saturating_add(cost::keypoints(ws.features.len()))
     }

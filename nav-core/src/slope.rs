@@ -115,6 +115,23 @@ pub fn slope_into_binned_smoothed<'b, const CAP: usize>(
     out: &'b mut [SlopePx],
     fill_isolated: bool,
 ) -> Result<SlopeImage<'b>, FrameError> {
+    slope_into_binned_smoothed_counted::<CAP>(dem, k, sigma_px, out, fill_isolated)
+        .map(|(img, _)| img)
+}
+
+/// [`slope_into_binned_smoothed`], also returning the smoothing's missing-height work: how many
+/// column sums (one binned row's window at one column) held a missing height and were summed
+/// again term by term, with their normalisers. A frame without no-data has none; each no-data
+/// binned pixel adds up to `2R + 1` (its column's windows), so the count grows with the no-data
+/// area and, for scattered holes, with their number (the work model charges it,
+/// [`crate::cost::slope_nodata`]).
+pub fn slope_into_binned_smoothed_counted<'b, const CAP: usize>(
+    dem: &DemPatch<'_>,
+    k: usize,
+    sigma_px: f32,
+    out: &'b mut [SlopePx],
+    fill_isolated: bool,
+) -> Result<(SlopeImage<'b>, u32), FrameError> {
     if k == 0 || k > MAX_BIN {
         return Err(FrameError::TooLarge {
             needed: k,
@@ -168,6 +185,7 @@ pub fn slope_into_binned_smoothed<'b, const CAP: usize>(
     let mut dconst = [0.0f32; CAP];
     let mut dconst_for = f32::NAN;
     let mut wfull = [0.0f32; SMOOTH_RING];
+    let mut nodata_sums = 0u32;
     for (i, v) in wfull.iter_mut().enumerate().take(ring) {
         *v = wt.get(i.abs_diff(rad)).copied().unwrap_or(0.0);
     }
@@ -358,6 +376,8 @@ pub fn slope_into_binned_smoothed<'b, const CAP: usize>(
                     }
                     *nb = bad_run;
                 }
+                // At most `w` a row: the total stays below `w · h`, no overflow.
+                nodata_sums += bad_run;
                 // Normalisers of clean windows depend on the row only through `drow`.
                 if drow.to_bits() != dconst_for.to_bits() {
                     dconst_for = drow;
@@ -445,7 +465,7 @@ pub fn slope_into_binned_smoothed<'b, const CAP: usize>(
             }
         }
     }
-    SlopeImage::new_checked(out, w, h, pixel_m)
+    Ok((SlopeImage::new_checked(out, w, h, pixel_m)?, nodata_sums))
 }
 
 /// Widest binned frame (in binned pixels) [`slope_into_binned`] streams through its row rings.
@@ -704,6 +724,26 @@ mod tests {
                 assert_eq!(slope_is_valid(img.get(c, r)), !near, "({c}, {r})");
             }
         }
+        // The smoothing's missing-height work: none without a hole; one interior hole is held by
+        // its column's window in each of the 2R + 1 rows that reach it (R = 5 for σ 1.5), one
+        // at a frame edge by the R + 1 inside; no smoothing, no such work.
+        let count = |z: &[f32], sigma: f32| {
+            let mut out = [SLOPE_NODATA; N * N];
+            let dem = DemPatch::new_checked(z, N, N, 10.0).unwrap();
+            slope_into_binned_smoothed_counted::<N>(&dem, 1, sigma, &mut out, false)
+                .unwrap()
+                .1
+        };
+        assert_eq!(smoothing_radius(1.5), 5);
+        assert_eq!(count(&z, 1.5), 0);
+        assert_eq!(count(&holed, 1.5), 11);
+        assert_eq!(count(&holed, 0.0), 0);
+        let mut edge = z;
+        edge[20] = f32::NAN;
+        assert_eq!(count(&edge, 1.5), 6);
+        let mut two = holed;
+        two[20 * N + 21] = f32::NAN;
+        assert_eq!(count(&two, 1.5), 22);
         // Bad σ means no smoothing, a row wider than CAP a typed error; never a panic.
         for bad in [f32::NAN, -1.0, f32::INFINITY] {
             assert!(slope_into_binned_smoothed::<N>(&dem, 1, bad, &mut out, false).is_ok());

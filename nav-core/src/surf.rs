@@ -85,6 +85,7 @@ impl<const N: usize> Features<N> {
             features: heapless::Vec::new(),
             dropped: 0,
             stats: DetectStats {
+                candidates: 0,
                 maxima: 0,
                 rejected_nodata: 0,
                 rejected_refine: 0,

@@ -83,8 +83,8 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
     );
     let d = run.report.detect_stats;
     println!(
-        "detector   {} maxima: {} on no data, {} refused by refinement, {} below the tile's scale",
-        d.maxima, d.rejected_nodata, d.rejected_refine, d.rejected_scale
+        "detector   {} responses above the threshold, {} maxima: {} on no data, {} refused by refinement, {} below the tile's scale",
+        d.candidates, d.maxima, d.rejected_nodata, d.rejected_refine, d.rejected_scale
     );
     match (s.rotation_deg, s.heading_err_deg, s.scale, s.pos_err_m) {
         (Some(r), Some(he), Some(sc), Some(pe)) => {

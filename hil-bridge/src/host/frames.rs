@@ -335,14 +335,92 @@ fn stress(kind: FrameKind, seed: u64) -> Vec<f32> {
     z
 }
 
-/// Generate the set: `terrain_frames` terrain frames (headings 0–345°, every sixth with a prior,
-/// one with holes), [`GENTLE_FRAMES`] gentle frames with a prior, the five stress frames, and
-/// two stress frames with a prior.
-pub fn generate_set(terrain_frames: usize) -> Result<FrameSet> {
-    let params = TerrainParams {
+/// The synthetic terrain a frame set is cut from: the recorded set CI runs is
+/// [`SetTerrain::DEFAULT`] (a Shoemaker-like floor); others check the firmware's counts, and the
+/// work model's calibration, on other ground (`hil-bridge run --terrain plains`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SetTerrain {
+    /// Terrain preset.
+    pub preset: Preset,
+    /// Window in the preset's host crater.
+    pub window: Window,
+    /// Terrain seed.
+    pub seed: u64,
+}
+
+impl SetTerrain {
+    /// The recorded set's terrain.
+    pub const DEFAULT: Self = Self {
         preset: Preset::Shoemaker,
         window: Window::Floor,
         seed: TERRAIN_SEED,
+    };
+
+    /// `PRESET[:WINDOW[:SEED]]`, e.g. `plains`, `fresh:rim`, `shackleton:wall:2` (window `floor`
+    /// and seed [`TERRAIN_SEED`] by default).
+    pub fn parse(s: &str) -> Result<Self> {
+        use clap::ValueEnum;
+        let mut parts = s.split(':');
+        let preset = parts.next().unwrap_or_default();
+        let preset = Preset::from_str(preset, true).map_err(|_| {
+            anyhow::anyhow!(
+                "unknown terrain preset {preset:?}: one of shackleton, shoemaker, lola, plains, fresh"
+            )
+        })?;
+        let window = match parts.next() {
+            None => Window::Floor,
+            Some(w) => Window::from_str(w, true)
+                .map_err(|_| anyhow::anyhow!("unknown window {w:?}: floor, wall or rim"))?,
+        };
+        let seed = match parts.next() {
+            None => TERRAIN_SEED,
+            Some(v) => v
+                .parse()
+                .with_context(|| format!("terrain seed {v:?} is not an unsigned integer"))?,
+        };
+        if let Some(extra) = parts.next() {
+            bail!("terrain {s:?}: unexpected {extra:?} after PRESET:WINDOW:SEED");
+        }
+        Ok(Self {
+            preset,
+            window,
+            seed,
+        })
+    }
+
+    /// Short name, e.g. `plains-floor-8` (the set's folder and the tile's projection note).
+    pub fn label(&self) -> String {
+        format!(
+            "{}-{}-{}",
+            value_name(&self.preset),
+            value_name(&self.window),
+            self.seed
+        )
+    }
+}
+
+/// A terrain enum's name as the command line spells it.
+fn value_name<T: clap::ValueEnum>(v: &T) -> String {
+    v.to_possible_value()
+        .map(|p| p.get_name().to_string())
+        .unwrap_or_default()
+}
+
+/// Generate the recorded set on the default terrain ([`SetTerrain::DEFAULT`]); see
+/// [`generate_set_on`].
+pub fn generate_set(terrain_frames: usize) -> Result<FrameSet> {
+    generate_set_on(SetTerrain::DEFAULT, terrain_frames)
+}
+
+/// Generate the set on `terrain`: `terrain_frames` terrain frames (headings 0–345°, every sixth
+/// with a prior, one with holes), [`GENTLE_FRAMES`] gentle frames with a prior, the noisy frames,
+/// the five stress frames, two stress frames with a prior, the atlas sequence and the final
+/// phase.
+pub fn generate_set_on(terrain: SetTerrain, terrain_frames: usize) -> Result<FrameSet> {
+    let params = TerrainParams {
+        preset: terrain.preset,
+        window: terrain.window,
+        seed: terrain.seed,
         size_m: TERRAIN_SIDE as f64 * FRAME_PIXEL_M as f64,
         pixel_m: FRAME_PIXEL_M as f64,
     };
@@ -382,7 +460,14 @@ pub fn generate_set(terrain_frames: usize) -> Result<FrameSet> {
         origin_y_m: 0.5 * (TERRAIN_SIDE as f64 * FRAME_PIXEL_M as f64) - 0.5 * TILE_PIXEL_M,
         pixel_x_m: TILE_PIXEL_M,
         pixel_y_m: -TILE_PIXEL_M,
-        projection: "local metric grid, Shoemaker floor synthetic scene (hil-bridge)".into(),
+        projection: if terrain == SetTerrain::DEFAULT {
+            "local metric grid, Shoemaker floor synthetic scene (hil-bridge)".into()
+        } else {
+            format!(
+                "local metric grid, synthetic scene {} (hil-bridge)",
+                terrain.label()
+            )
+        },
     };
     let tile = build_tile(
         &img,
@@ -937,5 +1022,31 @@ impl FrameSet {
             atlas,
             frames,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn terrains_parse_with_defaults_and_refuse_typos() {
+        assert_eq!(SetTerrain::parse("shoemaker").unwrap(), SetTerrain::DEFAULT);
+        let t = SetTerrain::parse("fresh:rim:3").unwrap();
+        assert_eq!(
+            (t.preset, t.window, t.seed),
+            (Preset::Fresh, Window::Rim, 3)
+        );
+        assert_eq!(t.label(), "fresh-rim-3");
+        assert_eq!(SetTerrain::DEFAULT.label(), "shoemaker-floor-8");
+        for bad in [
+            "",
+            "mars",
+            "plains:ridge",
+            "plains:floor:x",
+            "plains:floor:1:2",
+        ] {
+            assert!(SetTerrain::parse(bad).is_err(), "{bad:?}");
+        }
     }
 }

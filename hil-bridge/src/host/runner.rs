@@ -2,7 +2,7 @@
 //! link on two FIFOs, streams the frames with fault injection, compares every result bit for bit
 //! with nav-core on the host, and reports.
 
-use super::frames::{Frame, FrameSet};
+use super::frames::{Frame, FrameSet, SetTerrain};
 use super::link::{Fault, HostCounters, HostLink, Incoming, spawn_reader};
 use crate::convert;
 use crate::job::{Atlas, FinalPhase};
@@ -49,6 +49,9 @@ pub struct RunOptions {
     pub regenerate: bool,
     /// Print progress.
     pub progress: bool,
+    /// The terrain the set is cut from (the recorded set's by default; any other lives in its
+    /// own folder, `target/hil/data-LABEL`).
+    pub terrain: SetTerrain,
 }
 
 impl RunOptions {
@@ -63,6 +66,7 @@ impl RunOptions {
             uart: false,
             regenerate: false,
             progress: true,
+            terrain: SetTerrain::DEFAULT,
         }
     }
     fn work_dir(&self) -> PathBuf {
@@ -70,7 +74,12 @@ impl RunOptions {
     }
     /// Where the recorded frame set lives.
     pub fn data_dir(&self) -> PathBuf {
-        self.work_dir().join("data")
+        if self.terrain == SetTerrain::DEFAULT {
+            self.work_dir().join("data")
+        } else {
+            self.work_dir()
+                .join(format!("data-{}", self.terrain.label()))
+        }
     }
 }
 
@@ -131,6 +140,8 @@ pub struct FrameRecord {
 /// The run's report (written as JSON).
 #[derive(Debug, Clone, Serialize)]
 pub struct Report {
+    /// The terrain the frame set was cut from (`preset-window-seed`).
+    pub terrain: String,
     /// Frames sent.
     pub frames: usize,
     /// Frames with a fix.
@@ -193,7 +204,7 @@ pub fn load_or_generate(opts: &RunOptions) -> Result<FrameSet> {
         opts.progress,
         format!("generating the frame set in {}", dir.display()),
     );
-    let set = super::frames::generate_set(18)?;
+    let set = super::frames::generate_set_on(opts.terrain, 18)?;
     set.write(&dir)?;
     Ok(set)
 }
@@ -861,6 +872,7 @@ pub fn run(opts: &RunOptions) -> Result<Report> {
         0.0
     };
     let report = Report {
+        terrain: opts.terrain.label(),
         frames: n,
         fixes: records.iter().filter(|r| r.outcome == "fix").count(),
         bit_exact_frames: records.iter().filter(|r| r.bit_exact).count(),
