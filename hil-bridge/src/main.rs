@@ -24,7 +24,8 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Cmd {
-    /// Write the recorded frame set (tile, frames, truth) to target/hil/data.
+    /// Write the recorded frame set (tile, frames, truth) to target/hil/data (another terrain's
+    /// to target/hil/data-LABEL).
     Gen {
         /// Terrain frames (five stress frames follow them).
         #[arg(long, default_value_t = 18)]
@@ -51,7 +52,11 @@ enum Cmd {
     },
     /// Print a digest of nav-core's host results on every frame of the set (one line per frame):
     /// a change of any output bit changes the digest, so optimisations can be checked exactly.
-    Digest,
+    Digest {
+        /// The set cut from this terrain, `PRESET[:WINDOW[:SEED]]` (as for `run`).
+        #[arg(long, value_parser = SetTerrain::parse)]
+        terrain: Option<SetTerrain>,
+    },
     /// Build the firmware, run every frame through it under QEMU, compare with the host.
     Run {
         /// Send at most N frames (the stress frames are kept).
@@ -144,8 +149,9 @@ fn main() -> Result<()> {
                 }
             }
         }
-        Cmd::Digest => {
-            let opts = RunOptions::new(root());
+        Cmd::Digest { terrain } => {
+            let mut opts = RunOptions::new(root());
+            opts.terrain = terrain.unwrap_or(SetTerrain::DEFAULT);
             let set = hil_bridge::host::runner::load_or_generate(&opts)?;
             let tile = nav_core::Tile::parse(&set.tile).map_err(|e| anyhow::anyhow!("{e}"))?;
             let nav = nav_core::Navigator::new(tile, nav_core::NavConfig::default());

@@ -42,7 +42,8 @@ fn no_frame_spends_more_than_its_budget_or_its_fixed_stage() {
                 &mut px,
                 unbounded.config().fill_dropouts,
             )
-            .map_or(0, |(_, n)| n)
+            .expect("the frame's slope")
+            .1
         };
         let own = f.meta.prior.as_ref().map(prior);
         // A prior 40 px off (σ as given, or 2.5 px): the search fails, the features follow.
@@ -50,7 +51,17 @@ fn no_frame_spends_more_than_its_budget_or_its_fixed_stage() {
             center_tile_px: [p.center_tile_px[0] + 40.0, p.center_tile_px[1]],
             ..p
         });
-        for p in [own, off, None] {
+        // Frames sent without a prior also fly with one at their truth (σ 2.5 px, 2°): the
+        // search-first path then charges their slope too (the frame with holes among them).
+        let at_truth = f.meta.truth.filter(|_| own.is_none()).map(|t| Prior {
+            center_tile_px: [t.center_tile_px[0] as f32, t.center_tile_px[1] as f32],
+            sigma_px: 2.5,
+            heading_rad: t.heading_rad as f32,
+            heading_sigma_rad: 2f32.to_radians(),
+            scale: t.scale as f32,
+            scale_sigma: 0.02,
+        });
+        for p in [own, off, at_truth, None] {
             let free = unbounded.locate_dem(&mut ws, &dem, p.as_ref()).unwrap();
             for budget in (4..=20).map(|m| m * 1_000_000).chain([cost::FLIGHT_BUDGET]) {
                 let nav = Navigator::new(
@@ -63,12 +74,7 @@ fn no_frame_spends_more_than_its_budget_or_its_fixed_stage() {
                 let r = nav.locate_dem(&mut ws, &dem, p.as_ref()).unwrap();
                 let binned =
                     (w / nav.bin_factor(f.meta.pixel_m)) * (h / nav.bin_factor(f.meta.pixel_m));
-                let fixed = cost::fixed_first_stage(
-                    binned,
-                    nodata_sums,
-                    !(p.is_some() && nav.config().search_first),
-                    flight::MAX_KEYPOINTS,
-                );
+                let fixed = cost::fixed_first_stage(binned, nodata_sums);
                 assert!(
                     r.work <= budget.max(fixed),
                     "{} budget {budget}: work {} (fixed stage {fixed}): {r:?}",
@@ -143,4 +149,69 @@ fn a_failed_search_leaves_no_room_for_the_feature_path_under_a_small_budget() {
     assert!(t.over_budget, "{t:?}");
     assert!(t.work <= tight.config().work_budget, "{t:?}");
     assert!(t.outcome.is_err(), "{t:?}");
+}
+
+#[test]
+fn holes_that_spoil_the_smoothing_leave_no_room_for_detection() {
+    // Four gaps of four raw rows across a terrain frame (8 % of it missing): two whole binned
+    // rows each, which spoil the smoothing windows of 17 binned rows around them. The slope
+    // then costs ≈ 11 M; with detection and a whole keypoint budget (9.5 M) the frame would
+    // pass 20 M, so it ends after the slope.
+    let set = generate_set(6).expect("frame set");
+    let tile = Tile::parse(&set.tile).expect("tile");
+    let f = set
+        .frames
+        .iter()
+        .find(|f| f.meta.name.starts_with("terrain-00"))
+        .expect("terrain frame");
+    let (w, h) = (f.meta.width as usize, f.meta.height as usize);
+    let mut z = f.heights_m.clone();
+    for band in [20usize, 70, 120, 170] {
+        for row in band..band + 4 {
+            z[row * w..(row + 1) * w].fill(f32::NAN);
+        }
+    }
+    let dem = DemPatch::new_checked(&z, w, h, FRAME_PIXEL_M).expect("frame");
+    let nav = Navigator::new(tile, NavConfig::default());
+    let k = nav.bin_factor(FRAME_PIXEL_M);
+    let mut px = vec![nav_core::SLOPE_NODATA; w * h];
+    let (_, sums) =
+        nav_core::slope::slope_into_binned_smoothed_counted::<{ flight::MAX_FRAME_WIDTH }>(
+            &dem,
+            k,
+            nav.frame_smoothing_px(FRAME_PIXEL_M * k as f32),
+            &mut px,
+            nav.config().fill_dropouts,
+        )
+        .expect("slope");
+    let binned = (w / k) * (h / k);
+    let slope = cost::fixed_first_stage(binned, sums);
+    eprintln!("{sums} column sums over the gaps: the slope costs {slope}");
+    assert!(
+        slope + cost::detection_stage(binned, flight::MAX_KEYPOINTS) > cost::FLIGHT_BUDGET,
+        "{sums} column sums: slope {slope}"
+    );
+    let mut ws = Box::new(Workspace::new());
+    let r = nav.locate_dem(&mut ws, &dem, None).unwrap();
+    assert_eq!(r.outcome, Err(NoFix::OverBudget), "{r:?}");
+    assert!(r.over_budget && !r.detected, "{r:?}");
+    assert_eq!(r.work, slope);
+    assert!(ws.features().is_empty());
+    // Without a budget the same frame is detected, within the worst case the gate reserved
+    // (here the gaps leave no keypoint: every maximum's filter touches them).
+    let free = Navigator::new(
+        tile,
+        NavConfig {
+            work_budget: u32::MAX,
+            ..NavConfig::default()
+        },
+    )
+    .locate_dem(&mut ws, &dem, None)
+    .unwrap();
+    assert!(
+        free.detected
+            && free.work > slope
+            && free.work <= slope + cost::detection_stage(binned, flight::MAX_KEYPOINTS),
+        "{free:?}"
+    );
 }

@@ -916,9 +916,11 @@ impl AtlasNavigator {
                 // Wholly inside the deepest tile: no neighbour can help, so exactly the single
                 // tile's path (with the prior, the area search first when so configured).
                 (k, nav.locate_dem(ws, dem, Some(&tp))?, false)
+            } else if let Some(refused) = nav.extract_dem(ws, dem, k)? {
+                // Over its edge, but the features do not fit after the slope.
+                (k, refused, false)
             } else {
                 // Over its edge: the features first, which a neighbour may need.
-                nav.extract_dem(ws, dem, k)?;
                 let spent = nav.extraction_work(ws);
                 let mut report =
                     nav.locate_extracted_dem(ws, (w, h), k, Some(&tp), false, spent)?;

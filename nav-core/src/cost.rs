@@ -11,9 +11,11 @@
 //! does not fit is skipped ([`crate::search::SearchError::OverBudget`]), a feature path after a
 //! failed search too ([`crate::NoFix::OverBudget`]), matching runs only where it fits, and MSAC
 //! and the refinements get at most the samples and passes the rest of the budget pays for
-//! ([`crate::FrameReport::over_budget`] says when a cap bound). A frame's work is then at most `max(budget, fixed)`, `fixed` being the
-//! stage every frame runs whatever the budget: slope, and on the feature path first its detection
-//! and keypoints ([`fixed_first_stage`]; 5.6 M or 15.1 M for a 200 × 200 frame binned by 2).
+//! ([`crate::FrameReport::over_budget`] says when a cap bound). Detection with a whole keypoint
+//! budget runs only if it fits after the slope ([`detection_stage`]). A frame's work is then at
+//! most `max(budget, fixed)`, `fixed` being the stage every frame runs whatever the budget: its
+//! slope ([`fixed_first_stage`]; 5.6 M for a 200 × 200 frame binned by 2, up to 12.9 M where
+//! missing heights spoil every smoothing window).
 //!
 //! The constants come from HIL profiles under QEMU (the TCG plugin's per-block counts, sessions
 //! 28 and 29: 200 × 200 frames binned to 100 × 100, 50 m terrain smoothing), checked in session
@@ -100,23 +102,20 @@ pub const fn keypoints(n: usize) -> u32 {
     mul(PER_KEYPOINT, n)
 }
 
-/// Work of the stage a frame of `binned_px` binned pixels always runs: its slope (with
-/// `nodata_sums` column sums over missing heights, [`slope_nodata`]), and on the feature path
-/// first (`features_first`) its detection and up to `max_keypoints` keypoints.
-pub const fn fixed_first_stage(
-    binned_px: usize,
-    nodata_sums: u32,
-    features_first: bool,
-    max_keypoints: usize,
-) -> u32 {
-    let slope = slope(binned_px).saturating_add(slope_nodata(nodata_sums));
-    if features_first {
-        slope
-            .saturating_add(detection(binned_px))
-            .saturating_add(keypoints(max_keypoints))
-    } else {
-        slope
-    }
+/// Work of the stage a frame of `binned_px` binned pixels runs whatever the budget: its slope,
+/// with `nodata_sums` column sums over missing heights ([`slope_nodata`]). Every later stage,
+/// detection included, runs only if it fits, so a frame's work is at most the larger of the
+/// budget and this (5.6 M for a 100 × 100 binned frame without holes, at most 12.9 M with
+/// every column sum over one).
+pub const fn fixed_first_stage(binned_px: usize, nodata_sums: u32) -> u32 {
+    slope(binned_px).saturating_add(slope_nodata(nodata_sums))
+}
+
+/// Work of the feature path's first stage after the slope: detection and `max_keypoints`
+/// keypoints (9.5 M for a 100 × 100 binned frame and 16 keypoints); it runs only if it fits
+/// after the slope.
+pub const fn detection_stage(binned_px: usize, max_keypoints: usize) -> u32 {
+    detection(binned_px).saturating_add(keypoints(max_keypoints))
 }
 
 /// Work of matching `features` frame features against a tile of `tile_len` features of which
@@ -185,15 +184,19 @@ mod tests {
     #[test]
     fn flight_frames_fixed_stage_fits_the_budget() {
         // A 200 × 200 frame binned by 2: slope 5.6 M with a prior, 15.1 M lost in space.
-        assert_eq!(fixed_first_stage(100 * 100, 0, false, 16), 5_600_000);
-        assert_eq!(fixed_first_stage(100 * 100, 0, true, 16), 15_080_000);
-        assert!(fixed_first_stage(100 * 100, 0, true, 16) < FLIGHT_BUDGET);
-        // The HIL's frames with holes (13 % no data): 1 604 column sums, 1.17 M more.
+        assert_eq!(fixed_first_stage(100 * 100, 0), 5_600_000);
         assert_eq!(
-            fixed_first_stage(100 * 100, 1604, true, 16)
-                - fixed_first_stage(100 * 100, 0, true, 16),
+            fixed_first_stage(100 * 100, 0) + detection_stage(100 * 100, 16),
+            15_080_000
+        );
+        // The HIL's frames with holes (13 % no data): 1 604 column sums, 1.17 M more; at most
+        // one per binned pixel: the slope alone stays well inside the flight budget.
+        assert_eq!(
+            fixed_first_stage(100 * 100, 1604) - fixed_first_stage(100 * 100, 0),
             1_170_920
         );
+        assert_eq!(fixed_first_stage(100 * 100, 100 * 100), 12_900_000);
+        assert!(fixed_first_stage(100 * 100, 100 * 100) < FLIGHT_BUDGET);
     }
 
     #[test]

@@ -362,8 +362,9 @@ pub const fn ring_len(width: usize) -> usize {
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct DetectStats {
-    /// Responses above the threshold, each tested for a strict 3×3×3 maximum (the detector's
-    /// terrain-dependent work: steep or rough ground has many more than gentle ground).
+    /// Responses above the threshold in the layers searched, inside the filters' reach, each
+    /// tested for a strict 3×3×3 maximum (the detector's terrain-dependent work: steep or rough
+    /// ground has many more than gentle ground).
     pub candidates: u32,
     /// Strict 3×3×3 maxima above the threshold, in the layers that can reach `min_scale_px`
     /// (layers that cannot are not searched at all).
@@ -507,7 +508,7 @@ pub(crate) fn detect(
                     if v.is_nan() || v <= cfg.threshold {
                         continue;
                     }
-                    stats.candidates += 1;
+                    stats.candidates = stats.candidates.saturating_add(1);
                     if !strict_max(ring, &rows, gx, v) {
                         continue;
                     }

@@ -335,7 +335,8 @@ impl<const MAX_PX: usize> SlopeBuffer<MAX_PX> {
         Ok(img)
     }
 
-    /// The last [`Self::compute_binned_smoothed`]'s smoothing work over missing heights (see
+    /// How many column sums of the last [`Self::compute_binned_smoothed`]'s smoothing held a
+    /// missing height and were summed again term by term (a count, see
     /// [`crate::slope::slope_into_binned_smoothed_counted`]; 0 after any other computation).
     pub fn nodata_sums(&self) -> u32 {
         self.nodata_sums

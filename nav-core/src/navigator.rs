@@ -86,11 +86,11 @@ pub struct NavConfig {
     /// or higher, no false fix, docs/registration.md).
     pub search_first: bool,
     /// Work budget of one frame, in [`crate::cost`] units (estimated Cortex-M4 instructions):
-    /// before each variable stage (area search, a feature path after a failed search,
-    /// matching, MSAC, guided matching, each refinement) the navigator checks that the stage's worst case fits in what is left,
+    /// before each variable stage (area search, detection, a feature path after a failed
+    /// search, matching, MSAC, guided matching, each refinement) the navigator checks that the stage's worst case fits in what is left,
     /// and skips it or caps its samples and passes to fit ([`FrameReport::over_budget`]). A
-    /// frame's [`FrameReport::work`] is then at most the larger of this and its fixed first
-    /// stage ([`crate::cost::fixed_first_stage`]). Default [`crate::cost::FLIGHT_BUDGET`]
+    /// frame's [`FrameReport::work`] is then at most the larger of this and its slope
+    /// ([`crate::cost::fixed_first_stage`]). Default [`crate::cost::FLIGHT_BUDGET`]
     /// (20 M); `u32::MAX` leaves the frame unbounded (a ground-only option).
     pub work_budget: u32,
 }
@@ -456,7 +456,9 @@ impl<'t> Navigator<'t> {
             }
             return Ok(report);
         }
-        self.extract_dem(ws, dem, k)?;
+        if let Some(refused) = self.extract_dem(ws, dem, k)? {
+            return Ok(refused);
+        }
         let spent = self.extraction_work(ws);
         self.locate_extracted_dem(ws, (w, h), k, prior, true, spent)
     }
@@ -549,16 +551,36 @@ impl<'t> Navigator<'t> {
         Ok(())
     }
 
-    /// The first half of [`Self::locate_dem`]: the frame's slope (binned by `k`, smoothed as
-    /// the tile says) and its features (in frame pixels) into `ws`.
+    /// The first half of [`Self::locate_dem`] on the features-first path: the frame's slope
+    /// (binned by `k`, smoothed as the tile says) into `ws`, then, if its detection and a whole
+    /// keypoint budget fit in the work budget after the slope, its features (in frame pixels).
+    /// `Some(report)` (no fix, [`NoFix::OverBudget`], the slope's work) when they do not: the
+    /// smoothing over missing heights ([`cost::slope_nodata`]) can take up to 7.3 M of a
+    /// 100 × 100 binned frame, and nothing after the slope may push a frame past the budget.
     pub(crate) fn extract_dem<const P: usize, const W: usize, const K: usize, const M: usize>(
         &self,
         ws: &mut NavWorkspace<P, W, K, M>,
         dem: &DemPatch<'_>,
         k: usize,
-    ) -> Result<(), NavError> {
+    ) -> Result<Option<FrameReport>, NavError> {
         self.slope_dem(ws, dem, k)?;
-        self.features_of_slope(ws, k)
+        let binned_px = ws.slope.image().map_or(0, |i| i.width() * i.height());
+        let slope =
+            cost::slope(binned_px).saturating_add(cost::slope_nodata(ws.slope.nodata_sums()));
+        if slope.saturating_add(cost::detection_stage(binned_px, K)) > self.cfg.work_budget {
+            ws.features.clear();
+            ws.matches.clear();
+            ws.inlier.fill(false);
+            let mut refused = FrameReport {
+                outcome: Err(NoFix::OverBudget),
+                over_budget: true,
+                ..FrameReport::nothing_yet()
+            };
+            refused.charge(slope);
+            return Ok(Some(refused));
+        }
+        self.features_of_slope(ws, k)?;
+        Ok(None)
     }
 
     /// The part of [`Self::locate_dem`] after the frame's slope and features are in `ws`:

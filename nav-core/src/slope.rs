@@ -376,8 +376,7 @@ pub fn slope_into_binned_smoothed_counted<'b, const CAP: usize>(
                     }
                     *nb = bad_run;
                 }
-                // At most `w` a row: the total stays below `w · h`, no overflow.
-                nodata_sums += bad_run;
+                nodata_sums = nodata_sums.saturating_add(bad_run);
                 // Normalisers of clean windows depend on the row only through `drow`.
                 if drow.to_bits() != dconst_for.to_bits() {
                     dconst_for = drow;

@@ -364,13 +364,23 @@ impl SetTerrain {
         let preset = parts.next().unwrap_or_default();
         let preset = Preset::from_str(preset, true).map_err(|_| {
             anyhow::anyhow!(
-                "unknown terrain preset {preset:?}: one of shackleton, shoemaker, lola, plains, fresh"
+                "unknown terrain preset {preset:?}: one of {}",
+                value_names(Preset::value_variants())
             )
         })?;
         let window = match parts.next() {
             None => Window::Floor,
-            Some(w) => Window::from_str(w, true)
-                .map_err(|_| anyhow::anyhow!("unknown window {w:?}: floor, wall or rim"))?,
+            Some(w) => Window::from_str(w, true).map_err(|_| {
+                anyhow::anyhow!(
+                    "unknown window {w:?}: one of {}",
+                    value_names(Window::value_variants())
+                )
+            })?,
+        };
+        // Presets without a host crater are the same scene for every window: one set, one name.
+        let window = match preset {
+            Preset::Lola | Preset::Plains => Window::Floor,
+            _ => window,
         };
         let seed = match parts.next() {
             None => TERRAIN_SEED,
@@ -397,6 +407,11 @@ impl SetTerrain {
             self.seed
         )
     }
+}
+
+/// A terrain enum's values as the command line spells them, comma-separated.
+fn value_names<T: clap::ValueEnum>(all: &[T]) -> String {
+    all.iter().map(value_name).collect::<Vec<_>>().join(", ")
 }
 
 /// A terrain enum's name as the command line spells it.
@@ -1039,6 +1054,11 @@ mod tests {
         );
         assert_eq!(t.label(), "fresh-rim-3");
         assert_eq!(SetTerrain::DEFAULT.label(), "shoemaker-floor-8");
+        // No host crater, no window: `plains:rim` is the plains' one scene.
+        assert_eq!(
+            SetTerrain::parse("plains:rim").unwrap().label(),
+            "plains-floor-8"
+        );
         for bad in [
             "",
             "mars",
