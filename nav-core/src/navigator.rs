@@ -309,6 +309,13 @@ impl<const MAX_PX: usize, const MAX_W: usize, const MAX_KP: usize, const MAX_MAT
     ) {
         (&mut self.slope, &mut self.surf, &mut self.features)
     }
+    /// No features, matches or inlier flags: a frame that ends before its feature path must not
+    /// show the last frame's through [`Self::features`], [`Self::matches`] or [`Self::inliers`].
+    fn forget_features(&mut self) {
+        self.features.clear();
+        self.matches.clear();
+        self.inlier.fill(false);
+    }
     /// The frame features of the last call (frame pixel coordinates).
     pub fn features(&self) -> &Features<MAX_KP> {
         &self.features
@@ -412,27 +419,20 @@ impl<'t> Navigator<'t> {
                 search_first: true,
                 ..FrameReport::nothing_yet()
             };
-            first.charge(
-                cost::slope(binned_px).saturating_add(cost::slope_nodata(ws.slope.nodata_sums())),
-            );
+            first.charge(cost::fixed_first_stage(binned_px, ws.slope.nodata_sums()));
             self.area_search(&mut first, &img, k, &info, (w, h), prior);
             if first.outcome.is_ok() {
-                ws.features.clear();
-                ws.matches.clear();
-                ws.inlier.fill(false);
+                ws.forget_features();
                 return Ok(first);
             }
             // The feature path's detection, a whole keypoint budget and their matching must
             // fit in what the search left, or the frame ends here.
             let n_tile = self.tile.len();
             let candidates = self.candidates(prior, w, h);
-            let need = cost::detection(binned_px)
-                .saturating_add(cost::keypoints(K))
+            let need = cost::detection_stage(binned_px, K)
                 .saturating_add(cost::matching(K, n_tile, candidates));
             if need > self.room(&first) {
-                ws.features.clear();
-                ws.matches.clear();
-                ws.inlier.fill(false);
+                ws.forget_features();
                 first.outcome = Err(NoFix::OverBudget);
                 first.over_budget = true;
                 return Ok(first);
@@ -440,8 +440,7 @@ impl<'t> Navigator<'t> {
             self.features_of_slope(ws, k)?;
             let spent = first
                 .work
-                .saturating_add(cost::detection(binned_px))
-                .saturating_add(cost::keypoints(ws.features.len()));
+                .saturating_add(cost::detection_stage(binned_px, ws.features.len()));
             let mut report = self.locate_extracted_dem(ws, (w, h), k, prior, false, spent)?;
             // The search's verdict stays in the report (it ran, and why it gave nothing).
             report.search = first.search;
@@ -474,10 +473,8 @@ impl<'t> Navigator<'t> {
         ws: &NavWorkspace<P, W, K, M>,
     ) -> u32 {
         let binned_px = ws.slope.image().map_or(0, |i| i.width() * i.height());
-        cost::slope(binned_px)
-            .saturating_add(cost::slope_nodata(ws.slope.nodata_sums()))
-            .saturating_add(cost::detection(binned_px))
-            .saturating_add(cost::keypoints(ws.features.len()))
+        cost::fixed_first_stage(binned_px, ws.slope.nodata_sums())
+            .saturating_add(cost::detection_stage(binned_px, ws.features.len()))
     }
 
     /// What is left of the frame's work budget after `report`'s work.
@@ -565,12 +562,9 @@ impl<'t> Navigator<'t> {
     ) -> Result<Option<FrameReport>, NavError> {
         self.slope_dem(ws, dem, k)?;
         let binned_px = ws.slope.image().map_or(0, |i| i.width() * i.height());
-        let slope =
-            cost::slope(binned_px).saturating_add(cost::slope_nodata(ws.slope.nodata_sums()));
+        let slope = cost::fixed_first_stage(binned_px, ws.slope.nodata_sums());
         if slope.saturating_add(cost::detection_stage(binned_px, K)) > self.cfg.work_budget {
-            ws.features.clear();
-            ws.matches.clear();
-            ws.inlier.fill(false);
+            ws.forget_features();
             let mut refused = FrameReport {
                 outcome: Err(NoFix::OverBudget),
                 over_budget: true,
@@ -654,7 +648,7 @@ impl<'t> Navigator<'t> {
         }
         // The image comes with its slope: the frame is charged from detection on.
         let binned_px = (img.width() / k.max(1)) * (img.height() / k.max(1));
-        let spent = cost::detection(binned_px).saturating_add(cost::keypoints(ws.features.len()));
+        let spent = cost::detection_stage(binned_px, ws.features.len());
         let mut report = self.locate_features(ws, img.width(), img.height(), prior, spent);
         let binned;
         let used = if k > 1 {
