@@ -331,6 +331,36 @@ impl<const MAX_PX: usize, const MAX_W: usize, const MAX_KP: usize, const MAX_MAT
     }
 }
 
+/// Blur variance, in pixels², that block averaging and Horn's 3 × 3 gradient add to a slope
+/// image beyond its Gaussian smoothing, per axis and averaged over the two gradient components:
+/// the block mean k × k adds 1/12; the central difference of the derivative's own axis 1/3 (its
+/// response sin ωΔ / Δ is ω·(1 − ω²Δ²/6 + …), a Gaussian of variance Δ²/3 to second order); the
+/// 1-2-1 weights across it 1/2: (1/12 + 1/3 + 1/12 + 1/2) / 2 = 1/2.
+pub const GRID_BLUR_VAR_PX2: f32 = 0.5;
+
+/// Gaussian σ, in pixels of `binned_pixel_m` metres, that gives a frame slope image the same
+/// total blur as a tile of `tile_pixel_m` metres smoothed by `tile_smoothing_m` (metres, 1σ):
+/// `√(s² + c·(T² − b²)) / b` with c = [`GRID_BLUR_VAR_PX2`], T the tile's pixel and b the
+/// binned frame's. The grid's own blur grows with its pixel, so a frame binned finer than the
+/// tile takes a little more Gaussian, a coarser one a little less (never below 0).
+///
+/// Why: with `s / b` alone, frames binned to 15–17 m against a 20 m tile carried a blur the
+/// tile lacks, and their fixes moved by up to three times their error at 20 m, always in
+/// the same direction for a given patch of ground, so the refinement's covariance, built from
+/// residuals, could not see it: on the smooth plains (300 frames, seed 1, 7.4–9 m pixels,
+/// prior) mean NEES 3.4; with the matched blur 1.3 (docs/registration.md, "Matched blur").
+/// 0 when any input is not positive and finite.
+pub fn matched_smoothing_px(tile_smoothing_m: f32, tile_pixel_m: f32, binned_pixel_m: f32) -> f32 {
+    let ok = |x: f32| x.is_finite() && x > 0.0;
+    if !(ok(tile_smoothing_m) && ok(tile_pixel_m) && ok(binned_pixel_m)) {
+        return 0.0;
+    }
+    let (s, t, b) = (tile_smoothing_m, tile_pixel_m, binned_pixel_m);
+    let v = s * s + GRID_BLUR_VAR_PX2 * (t * t - b * b);
+    let sigma = libm::sqrtf(v.max(0.0)) / b;
+    if sigma.is_finite() { sigma } else { 0.0 }
+}
+
 /// Matches frames against one reference tile.
 #[derive(Debug, Clone, Copy)]
 pub struct Navigator<'t> {
@@ -368,12 +398,12 @@ impl<'t> Navigator<'t> {
     }
 
     /// Gaussian σ, in pixels of `binned_pixel_m` metres, by which a DEM frame is smoothed to
-    /// match the tile (0 when the tile is unsmoothed or [`NavConfig::match_tile_smoothing`] is
-    /// off).
+    /// match the tile ([`matched_smoothing_px`]; 0 when the tile is unsmoothed or
+    /// [`NavConfig::match_tile_smoothing`] is off).
     pub fn frame_smoothing_px(&self, binned_pixel_m: f32) -> f32 {
-        let s = self.tile.header().smoothing_m;
-        if self.cfg.match_tile_smoothing && s > 0.0 && binned_pixel_m > 0.0 {
-            s / binned_pixel_m
+        let h = self.tile.header();
+        if self.cfg.match_tile_smoothing {
+            matched_smoothing_px(h.smoothing_m, h.pixel_m() as f32, binned_pixel_m)
         } else {
             0.0
         }
@@ -1142,6 +1172,33 @@ mod tests {
             scale: 0.5,
             scale_sigma: 0.02,
         }
+    }
+
+    #[test]
+    fn the_matched_blur_equals_the_tiles_at_every_binned_pixel() {
+        let (s, t) = (40.0f32, 20.0f32);
+        // At the tile's own pixel the grid blur is shared: plain s / b.
+        assert_eq!(matched_smoothing_px(s, t, t), s / t);
+        for b in [12.0f32, 15.4, 17.0, 21.0, 27.0] {
+            let sigma = matched_smoothing_px(s, t, b);
+            // Total blur variance, m²: Gaussian plus the grid's, frame against tile.
+            let frame = (sigma * b).powi(2) + GRID_BLUR_VAR_PX2 * b * b;
+            let tile = s * s + GRID_BLUR_VAR_PX2 * t * t;
+            assert!(
+                (frame - tile).abs() < 1e-3 * tile,
+                "b {b}: {frame} vs {tile}"
+            );
+            // Finer than the tile: more Gaussian than s / b; coarser: less.
+            assert_eq!(sigma > s / b, b < t, "b {b}");
+        }
+        // A frame so coarse that its grid alone blurs more than the tile: no Gaussian.
+        assert_eq!(matched_smoothing_px(4.0, 20.0, 60.0), 0.0);
+        for bad in [0.0, -1.0, f32::NAN, f32::INFINITY] {
+            assert_eq!(matched_smoothing_px(bad, t, 15.0), 0.0);
+            assert_eq!(matched_smoothing_px(s, bad, 15.0), 0.0);
+            assert_eq!(matched_smoothing_px(s, t, bad), 0.0);
+        }
+        assert_eq!(matched_smoothing_px(f32::MAX, t, 15.0), 0.0);
     }
 
     #[test]

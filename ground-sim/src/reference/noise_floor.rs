@@ -82,7 +82,11 @@ pub fn noise_floor(
     // The navigator's binning rule (k = ⌊tile / frame + 0.3⌋ when ≥ 2).
     let k = ((tile_pixel_m / noise.pixel_m + 0.3).floor() as usize).max(1);
     let binned_m = noise.pixel_m * k as f64;
-    let sigma_px = (smoothing_m / binned_m) as f32;
+    let sigma_px = nav_core::navigator::matched_smoothing_px(
+        smoothing_m as f32,
+        tile_pixel_m as f32,
+        binned_m as f32,
+    );
     let side = noise.side_px;
     let (bw, bh) = (side / k, side / k);
     let mut cfg = *surf;
