@@ -344,12 +344,14 @@ pub const GRID_BLUR_VAR_PX2: f32 = 0.5;
 /// binned frame's. The grid's own blur grows with its pixel, so a frame binned finer than the
 /// tile takes a little more Gaussian, a coarser one a little less (never below 0).
 ///
-/// Why: with `s / b` alone, frames binned to 15–17 m against a 20 m tile carried a blur the
-/// tile lacks, and their fixes moved by up to three times their error at 20 m, always in
+/// Why: with `s / b` alone, frames binned to 15–17 m against a 20 m tile lacked blur the
+/// tile carries, and their fixes moved by up to three times their error at 20 m, always in
 /// the same direction for a given patch of ground, so the refinement's covariance, built from
 /// residuals, could not see it: on the smooth plains (300 frames, seed 1, 7.4–9 m pixels,
-/// prior) mean NEES 3.4; with the matched blur 1.3 (docs/registration.md, "Matched blur").
-/// 0 when any input is not positive and finite.
+/// prior) mean NEES 3.4; with the matched blur 1.7 (docs/registration.md, "Matched blur").
+/// 0 when any input is not positive and finite, or σ overflows (no tile that parses gets there:
+/// `tile::MAX_SMOOTHING_M`). nav-core cuts the Gaussian at `slope::MAX_SMOOTH_RADIUS`; the σ
+/// here does not allow for that cut (docs/registration.md, "Matched blur", Limits).
 pub fn matched_smoothing_px(tile_smoothing_m: f32, tile_pixel_m: f32, binned_pixel_m: f32) -> f32 {
     let ok = |x: f32| x.is_finite() && x > 0.0;
     if !(ok(tile_smoothing_m) && ok(tile_pixel_m) && ok(binned_pixel_m)) {
