@@ -331,6 +331,23 @@ impl<const MAX_PX: usize, const MAX_W: usize, const MAX_KP: usize, const MAX_MAT
     }
 }
 
+/// Binning factor (1 = none, at most [`crate::slope::MAX_BIN`]) that brings a DEM frame of
+/// `frame_pixel_m` metres per pixel near a tile of `tile_pixel_m` metres: ⌊T / p + 0.3⌋, so
+/// it rounds down unless nearly up and binning never makes the frame much coarser than the
+/// tile (a 2.5× finer frame bins by 2, a 1.8× finer one still by 2). 1 for inputs that are
+/// not positive.
+pub fn bin_factor_for(tile_pixel_m: f32, frame_pixel_m: f32) -> usize {
+    if !(frame_pixel_m > 0.0 && tile_pixel_m > 0.0) {
+        return 1;
+    }
+    let k = libm::floorf(tile_pixel_m / frame_pixel_m + 0.3);
+    if k >= 2.0 {
+        (k as usize).min(crate::slope::MAX_BIN)
+    } else {
+        1
+    }
+}
+
 /// Blur variance, in pixels², that block averaging and Horn's 3 × 3 gradient add to a slope
 /// image beyond its Gaussian smoothing, per axis and averaged over the two gradient components:
 /// the block mean k × k adds 1/12; the central difference of the derivative's own axis 1/3 (its
@@ -386,14 +403,8 @@ impl<'t> Navigator<'t> {
 
     /// Binning factor for a DEM frame of `frame_pixel_m` metres per pixel (1 = none).
     pub fn bin_factor(&self, frame_pixel_m: f32) -> usize {
-        if !self.cfg.bin_to_tile || !(frame_pixel_m > 0.0) {
-            return 1;
-        }
-        // Round down unless nearly up: binning must not make the frame much coarser than the
-        // tile (a 2.5× finer frame bins by 2, a 1.8× finer one still by 2).
-        let k = libm::floorf(self.tile.header().pixel_m() as f32 / frame_pixel_m + 0.3);
-        if k >= 2.0 {
-            (k as usize).min(crate::slope::MAX_BIN)
+        if self.cfg.bin_to_tile {
+            bin_factor_for(self.tile.header().pixel_m() as f32, frame_pixel_m)
         } else {
             1
         }
@@ -1173,6 +1184,20 @@ mod tests {
             heading_sigma_rad: 0.1,
             scale: 0.5,
             scale_sigma: 0.02,
+        }
+    }
+
+    #[test]
+    fn frames_bin_down_unless_nearly_up_and_within_the_cap() {
+        assert_eq!(bin_factor_for(20.0, 10.0), 2);
+        assert_eq!(bin_factor_for(20.0, 11.5), 2); // 1.74× finer: still 2
+        assert_eq!(bin_factor_for(20.0, 13.0), 1);
+        assert_eq!(bin_factor_for(20.0, 7.5), 2); // 2.67×: down to 2
+        assert_eq!(bin_factor_for(20.0, 7.4), 3); // 2.70×: nearly up, 3
+        assert_eq!(bin_factor_for(20.0, 0.5), crate::slope::MAX_BIN);
+        for bad in [0.0, -1.0, f32::NAN] {
+            assert_eq!(bin_factor_for(20.0, bad), 1);
+            assert_eq!(bin_factor_for(bad, 10.0), 1);
         }
     }
 

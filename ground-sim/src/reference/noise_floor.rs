@@ -59,7 +59,7 @@ pub const NOMINAL_FRAME_PIXEL_M: f64 = 10.0;
 /// against a tile of `tile_pixel_m` metres carrying terrain smoothing `smoothing_m` (metres),
 /// with the detector settings `surf` (its threshold ignored): the largest response SURF finds
 /// on [`FLOOR_FRAMES`] flat frames of white height noise, binned and smoothed as the navigator
-/// does (`nav_core::Navigator::bin_factor`, `frame_smoothing_px`).
+/// does (`nav_core::navigator::bin_factor_for`, `matched_smoothing_px`: the same functions).
 pub fn noise_floor(
     noise: &FrameNoise,
     tile_pixel_m: f64,
@@ -79,8 +79,7 @@ pub fn noise_floor(
     if noise.height_sigma_m == 0.0 {
         return Ok(0.0);
     }
-    // The navigator's binning rule (k = ⌊tile / frame + 0.3⌋ when ≥ 2).
-    let k = ((tile_pixel_m / noise.pixel_m + 0.3).floor() as usize).max(1);
+    let k = nav_core::navigator::bin_factor_for(tile_pixel_m as f32, noise.pixel_m as f32);
     let binned_m = noise.pixel_m * k as f64;
     let sigma_px = nav_core::navigator::matched_smoothing_px(
         smoothing_m as f32,
