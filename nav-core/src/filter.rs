@@ -13,7 +13,9 @@
 //! error has two parts. The ground's share ([`FilterConfig::fix_shared_fraction`] `s` of the
 //! fix's covariance `C`) is a first-order Gauss–Markov process over the ground: between two
 //! fixes it keeps the fraction `ρ` = the overlap of their footprints
-//! ([`footprint_correlation`]) and gains fresh error with covariance `(1 − ρ²)·s·C`. The rest,
+//! ([`footprint_correlation`]) and gains fresh error with covariance `(1 − ρ²)·s·C`, more when
+//! the new fix's share `s·C` exceeds what the process carries (fixes grow less precise as a
+//! descent's frames get finer; see `NavFilter::move_fix_error`). The rest,
 //! `(1 − s)·C`, is the frame's own (its range noise, which keypoints it kept) and is white. A
 //! fix from new ground (`ρ = 0`) is an ordinary independent measurement of covariance `C`; a
 //! fix of the same ground adds only its white part's worth.
@@ -218,6 +220,9 @@ pub struct NavFilter {
     fix_err: Vector3<f64>,
     /// Centre (east, north, m) and side (m) of the last fix's footprint; side 0: none yet.
     last_fix: ([f64; 2], f64),
+    /// Modelled variance of the ground error (east m², north m², yaw rad²) before any update:
+    /// the size the carried fix error is kept at (see [`Self::move_fix_error`]).
+    fix_ground_var: [f64; 3],
     /// Horizontal position (east, north, m) cloned at the current keyframe, if any.
     key: Option<[f64; 2]>,
     cov: MatN,
@@ -263,6 +268,7 @@ impl NavFilter {
             bg: Vector3::zeros(),
             fix_err: Vector3::zeros(),
             last_fix: ([0.0; 2], 0.0),
+            fix_ground_var: [0.0; 3],
             key: None,
             cov,
             cfg,
@@ -461,26 +467,65 @@ impl NavFilter {
 
     /// Gauss–Markov step of the fix error to a new footprint (centre east/north m, side m) for a
     /// measurement of covariance `cf` (east, north, yaw): rows and columns of its block scale by
-    /// the footprints' overlap ρ and fresh error `(1 − ρ²)·s·cf` is added. Returns the shared
-    /// fraction `s`.
+    /// the footprints' overlap ρ and fresh error `(1 − ρ²)·s·cf` is added. The ground error's
+    /// modelled variance before any update, `g_k` per axis, follows `g ← ρ²·g + (1 − ρ²)·t_k`
+    /// with `t_k = s·cf_kk` the new fix's ground share; where `t_k` exceeds `g_k`, the step adds
+    /// the difference `ρ²·(t_k − g_k)` as further fresh error on that axis and `g_k = t_k`: the
+    /// new fix's ground error is the carried one plus an independent part, never smaller than
+    /// its share. With steady fixes this is the plain Gauss–Markov step.
+    ///
+    /// Why: on a descent the fixes' σ rises several-fold within a minute (finer frames,
+    /// smaller footprints) while successive footprints overlap 99 %, so the plain step hardly
+    /// refreshes the carried error and the filter took the new fixes' common error at its old,
+    /// small size (16 km InSAR-map descents without velocimeter, session 32: 87.0 / 84.7 % of
+    /// NEES in band, seed 1). Two other forms were flown and dropped: rescaling the carried
+    /// error (and its covariances) to the new size made the fixes pull the position less and
+    /// cost the velocimeter runs 4–9 points; also shrinking it when a fix claims less made
+    /// the filter overconfident after momentarily confident fixes (docs/registration.md,
+    /// session 32). Returns the shared fraction `s`.
     fn move_fix_error(&mut self, centre: [f64; 2], footprint_m: f64, cf: &Matrix3<f64>) -> f64 {
         let rho = footprint_correlation(self.last_fix.0, self.last_fix.1, centre, footprint_m);
         self.last_fix = (centre, footprint_m.max(0.0));
+        let shared = self.cfg.fix_shared_fraction.clamp(0.0, 1.0);
+        let target = [0, 1, 2].map(|k| shared * cf.get((k, k)).copied().unwrap_or(0.0).max(0.0));
+        let scale = [rho; 3];
+        // Fresh error beyond the Gauss–Markov step's where the new fix's ground share exceeds
+        // the modelled variance: the new error is the carried one plus an independent part.
+        let mut extra = [0.0f64; 3];
+        for (k, g) in self.fix_ground_var.iter_mut().enumerate() {
+            let t = target.get(k).copied().unwrap_or(0.0);
+            if t > *g {
+                if let Some(e) = extra.get_mut(k) {
+                    *e = rho * rho * (t - *g);
+                }
+                *g = t;
+            } else {
+                *g = rho * rho * *g + (1.0 - rho * rho) * t;
+            }
+        }
         for i in 0..STATE_DIM {
-            for k in 0..3 {
+            for (k, g) in scale.iter().enumerate() {
                 if let Some(v) = self.cov.get_mut((FIX + k, i)) {
-                    *v *= rho;
+                    *v *= g;
                 }
                 if let Some(v) = self.cov.get_mut((i, FIX + k)) {
-                    *v *= rho;
+                    *v *= g;
                 }
             }
         }
-        let shared = self.cfg.fix_shared_fraction.clamp(0.0, 1.0);
         let fresh = cf * ((1.0 - rho * rho) * shared);
         let mut block = self.cov.fixed_view_mut::<3, 3>(FIX, FIX);
         block += fresh;
-        self.fix_err *= rho;
+        for (k, e) in extra.iter().enumerate() {
+            if let Some(v) = self.cov.get_mut((FIX + k, FIX + k)) {
+                *v += e;
+            }
+        }
+        for (k, g) in scale.iter().enumerate() {
+            if let Some(e) = self.fix_err.get_mut(k) {
+                *e *= g;
+            }
+        }
         self.symmetrise();
         shared
     }

@@ -150,9 +150,18 @@ fn bad_inputs_are_refused() {
 /// of the ground points inside its 400 m footprint (so successive fixes, 20 m apart, share 95 %
 /// of their points), half is the frame's own, new each time (the split the filter's default
 /// `fix_shared_fraction` assumes). The filter is told the footprint `told_footprint_m` (0:
-/// fixes independent). Returns the fraction of horizontal NEES values in the 95 % band of
-/// χ²(2), and their mean.
-fn fly_over_correlated_ground(told_footprint_m: f64, seed: u64) -> (f64, f64) {
+/// fixes independent). The ground's errors, the frame's and the σ each fix reports all grow
+/// linearly along the track from 1× to `growth`× (harder ground ahead, as on a descent whose
+/// frames get finer). The flyer moves at `speed` m/s. With `velocimeter` a 0.05 m/s velocity
+/// update follows each fix. Returns
+/// the fraction of horizontal NEES values in the 95 % band of χ²(2), and their mean.
+fn fly_over_correlated_ground(
+    told_footprint_m: f64,
+    growth: f64,
+    speed: f64,
+    velocimeter: bool,
+    seed: u64,
+) -> (f64, f64) {
     let cfg = FilterConfig::default();
     let mut rng = Pcg32::new(seed, 7);
     let (foot, sigma, per_foot) = (400.0f64, 4.0f64, 200.0f64);
@@ -186,7 +195,7 @@ fn fly_over_correlated_ground(told_footprint_m: f64, seed: u64) -> (f64, f64) {
     };
     let dt = 0.01;
     let g = cfg.gravity_mps2;
-    let (speed, z) = (20.0f64, 300.0f64);
+    let z = 300.0f64;
     let mut x = 0.0f64;
     let init = InitialState {
         position_m: [x + 30.0, -20.0, z],
@@ -209,24 +218,31 @@ fn fly_over_correlated_ground(told_footprint_m: f64, seed: u64) -> (f64, f64) {
         let gyro = [0, 1, 2].map(|_| cfg.gyro_noise / dt.sqrt() * gauss(&mut rng));
         f.propagate(dt, accel, gyro).unwrap();
         if step % 100 == 0 {
+            let k = 1.0 + (growth - 1.0) * step as f64 / 12_000.0;
             let (ex, ey) = fix_error(x, 0.0);
             let own = sigma * 0.5f64.sqrt();
-            let (ex, ey) = (ex + own * gauss(&mut rng), ey + own * gauss(&mut rng));
+            let (ex, ey) = (
+                k * (ex + own * gauss(&mut rng)),
+                k * (ey + own * gauss(&mut rng)),
+            );
+            let s2 = (k * sigma).powi(2);
             let m = FixMeasurement {
                 x_m: x + ex,
                 y_m: ey,
                 yaw_rad: 0.2f64.to_radians() * gauss(&mut rng),
-                position_cov_m2: [[sigma * sigma, 0.0], [0.0, sigma * sigma]],
+                position_cov_m2: [[s2, 0.0], [0.0, s2]],
                 yaw_sigma_rad: 0.2f64.to_radians(),
                 footprint_m: told_footprint_m,
             };
             f.update_fix(&m).unwrap();
             f.update_altitude(z + gauss(&mut rng), 1.0).unwrap();
-            f.update_velocity(
-                [speed + 0.05 * gauss(&mut rng), 0.05 * gauss(&mut rng), 0.0],
-                0.05,
-            )
-            .unwrap();
+            if velocimeter {
+                f.update_velocity(
+                    [speed + 0.05 * gauss(&mut rng), 0.05 * gauss(&mut rng), 0.0],
+                    0.05,
+                )
+                .unwrap();
+            }
             if step > 1000 {
                 let p = f.position_m();
                 let c = f.horizontal_cov_m2();
@@ -251,8 +267,8 @@ fn fixes_of_shared_ground_do_not_make_the_filter_overconfident() {
     let (mut told, mut blind) = ((0.0, 0.0), (0.0, 0.0));
     let seeds = [11u64, 12, 13, 14, 15, 16];
     for &seed in &seeds {
-        let a = fly_over_correlated_ground(400.0, seed);
-        let b = fly_over_correlated_ground(0.0, seed);
+        let a = fly_over_correlated_ground(400.0, 1.0, 20.0, true, seed);
+        let b = fly_over_correlated_ground(0.0, 1.0, 20.0, true, seed);
         println!(
             "seed {seed}: footprint told: {:.1} % in band, mean NEES {:.2}; fixes taken as independent: {:.1} %, {:.2}",
             a.0 * 100.0,
@@ -277,6 +293,25 @@ fn fixes_of_shared_ground_do_not_make_the_filter_overconfident() {
         blind.1 > 2.0 * told.1,
         "independent fixes were not overconfident: {blind:?}"
     );
+}
+
+#[test]
+fn fixes_whose_ground_error_grows_keep_the_filter_consistent() {
+    // The descent case: slow over the ground (successive footprints overlap 99 %), the ground
+    // gets harder (or the frames finer), every fix's error and reported σ grow fivefold along
+    // the track, no velocimeter. The shared error must grow
+    // with them; carried at its old size it would make the filter trust the fixes' common
+    // error far below its size.
+    let (mut band, mut mean) = (0.0, 0.0);
+    let seeds = [21u64, 22, 23, 24, 25, 26, 27, 28, 29, 30, 31, 32];
+    for &seed in &seeds {
+        let (b, m) = fly_over_correlated_ground(400.0, 5.0, 4.0, false, seed);
+        println!("seed {seed}: {:.1} % in band, mean NEES {m:.2}", b * 100.0);
+        band += b / seeds.len() as f64;
+        mean += m / seeds.len() as f64;
+    }
+    assert!(band >= 0.90, "{:.3} in band", band);
+    assert!((0.7..=3.5).contains(&mean), "mean NEES {mean:.2}");
 }
 
 #[test]

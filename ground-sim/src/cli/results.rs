@@ -604,7 +604,7 @@ pub fn run(a: &Args, dispatch: &dyn Fn(&[String]) -> anyhow::Result<()>) -> anyh
     )?;
     writeln!(
         md,
-        "The filter (`nav_core::filter`) takes each fix and each odometry offset with the covariance nav-core reports, no inflation. Successive fixes see mostly the same ground, so their errors are not independent: half of each covariance (`FilterConfig::fix_shared_fraction`) is carried as a fix-error state that the next measurement keeps in proportion to the footprints' overlap, the other half is white. NEES here is the filter's horizontal NEES at every frame (2 dof; 95 % band 0.05–7.38); \"final\" is the phase below 2 km. \"Offset NEES\" scores each odometry offset against the truth displacement under its own covariance (2 if its σ is right).\n"
+        "The filter (`nav_core::filter`) takes each fix and each odometry offset with the covariance nav-core reports, no inflation. Successive fixes see mostly the same ground, so their errors are not independent: half of each covariance (`FilterConfig::fix_shared_fraction`) is carried as a fix-error state that the next measurement keeps in proportion to the footprints' overlap, topped up with fresh error whenever a measurement's own shared half exceeds it (the fixes' σ grows several-fold as the frames get finer), the other half is white. NEES here is the filter's horizontal NEES at every frame (2 dof; 95 % band 0.05–7.38); \"final\" is the phase below 2 km. \"Offset NEES\" scores each odometry offset against the truth displacement under its own covariance (2 if its σ is right).\n"
     )?;
     writeln!(
         md,
