@@ -220,8 +220,9 @@ pub struct NavFilter {
     fix_err: Vector3<f64>,
     /// Centre (east, north, m) and side (m) of the last fix's footprint; side 0: none yet.
     last_fix: ([f64; 2], f64),
-    /// Modelled variance of the ground error (east m², north m², yaw rad²) before any update:
-    /// the size the carried fix error is kept at (see [`Self::move_fix_error`]).
+    /// Modelled prior variance of the current fix's ground error (east m², north m², yaw rad²),
+    /// before any update: the floor the top-up of [`Self::move_fix_error`] compares a new fix's
+    /// share with. The carried covariance after updates is smaller.
     fix_ground_var: [f64; 3],
     /// Horizontal position (east, north, m) cloned at the current keyframe, if any.
     key: Option<[f64; 2]>,
@@ -468,35 +469,44 @@ impl NavFilter {
     /// Gauss–Markov step of the fix error to a new footprint (centre east/north m, side m) for a
     /// measurement of covariance `cf` (east, north, yaw): rows and columns of its block scale by
     /// the footprints' overlap ρ and fresh error `(1 − ρ²)·s·cf` is added. The ground error's
-    /// modelled variance before any update, `g_k` per axis, follows `g ← ρ²·g + (1 − ρ²)·t_k`
+    /// modelled variance before any update, `g_k` per axis, follows `g_k ← ρ²·g_k + (1 − ρ²)·t_k`
     /// with `t_k = s·cf_kk` the new fix's ground share; where `t_k` exceeds `g_k`, the step adds
     /// the difference `ρ²·(t_k − g_k)` as further fresh error on that axis and `g_k = t_k`: the
     /// new fix's ground error is the carried one plus an independent part, never smaller than
     /// its share. With steady fixes this is the plain Gauss–Markov step.
     ///
     /// Why: on a descent the fixes' σ rises several-fold within a minute (finer frames,
-    /// smaller footprints) while successive footprints overlap 99 %, so the plain step hardly
+    /// smaller footprints) while successive footprints overlap 99 % or more (ρ up to
+    /// [`MAX_FIX_CORRELATION`]), so the plain step hardly
     /// refreshes the carried error and the filter took the new fixes' common error at its old,
     /// small size (16 km InSAR-map descents without velocimeter, session 32: 87.0 / 84.7 % of
     /// NEES in band, seed 1). Two other forms were flown and dropped: rescaling the carried
     /// error (and its covariances) to the new size made the fixes pull the position less and
     /// cost the velocimeter runs 4–9 points; also shrinking it when a fix claims less made
     /// the filter overconfident after momentarily confident fixes (docs/registration.md,
-    /// session 32). Returns the shared fraction `s`.
+    /// session 32). A limit: one fix with a momentarily large σ raises `g_k`, which then decays
+    /// only as the ground changes. Returns the shared fraction `s`.
     fn move_fix_error(&mut self, centre: [f64; 2], footprint_m: f64, cf: &Matrix3<f64>) -> f64 {
         let rho = footprint_correlation(self.last_fix.0, self.last_fix.1, centre, footprint_m);
         self.last_fix = (centre, footprint_m.max(0.0));
         let shared = self.cfg.fix_shared_fraction.clamp(0.0, 1.0);
-        let target = [0, 1, 2].map(|k| shared * cf.get((k, k)).copied().unwrap_or(0.0).max(0.0));
-        let scale = [rho; 3];
+        // A non-finite variance describes no ground error; it must not poison the model.
+        let target = [0, 1, 2].map(|k| {
+            let t = shared * cf.get((k, k)).copied().unwrap_or(0.0).max(0.0);
+            if t.is_finite() { t } else { 0.0 }
+        });
         // Fresh error beyond the Gauss–Markov step's where the new fix's ground share exceeds
         // the modelled variance: the new error is the carried one plus an independent part.
         let mut extra = [0.0f64; 3];
         for (k, g) in self.fix_ground_var.iter_mut().enumerate() {
             let t = target.get(k).copied().unwrap_or(0.0);
-            if t > *g {
+            if t > *g || !g.is_finite() {
                 if let Some(e) = extra.get_mut(k) {
-                    *e = rho * rho * (t - *g);
+                    *e = if g.is_finite() {
+                        rho * rho * (t - *g)
+                    } else {
+                        0.0
+                    };
                 }
                 *g = t;
             } else {
@@ -504,12 +514,12 @@ impl NavFilter {
             }
         }
         for i in 0..STATE_DIM {
-            for (k, g) in scale.iter().enumerate() {
+            for k in 0..3 {
                 if let Some(v) = self.cov.get_mut((FIX + k, i)) {
-                    *v *= g;
+                    *v *= rho;
                 }
                 if let Some(v) = self.cov.get_mut((i, FIX + k)) {
-                    *v *= g;
+                    *v *= rho;
                 }
             }
         }
@@ -521,11 +531,7 @@ impl NavFilter {
                 *v += e;
             }
         }
-        for (k, g) in scale.iter().enumerate() {
-            if let Some(e) = self.fix_err.get_mut(k) {
-                *e *= g;
-            }
-        }
+        self.fix_err *= rho;
         self.symmetrise();
         shared
     }

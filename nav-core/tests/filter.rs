@@ -145,15 +145,14 @@ fn bad_inputs_are_refused() {
     assert!(f.position_m().iter().all(|v| v.is_finite()));
 }
 
-/// Fly a straight level line at 20 m/s with 1 Hz fixes whose errors come mostly from the
+/// Fly a straight level line at `speed` m/s with 1 Hz fixes whose errors come mostly from the
 /// ground, as TRN's do: half of each fix's error variance is the mean of fixed per-point errors
-/// of the ground points inside its 400 m footprint (so successive fixes, 20 m apart, share 95 %
-/// of their points), half is the frame's own, new each time (the split the filter's default
+/// of the ground points inside its 400 m footprint (so successive fixes, 20 m apart at 20 m/s,
+/// share 95 % of their points; 4 m apart at 4 m/s, 99 %), half is the frame's own, new each time (the split the filter's default
 /// `fix_shared_fraction` assumes). The filter is told the footprint `told_footprint_m` (0:
 /// fixes independent). The ground's errors, the frame's and the σ each fix reports all grow
 /// linearly along the track from 1× to `growth`× (harder ground ahead, as on a descent whose
-/// frames get finer). The flyer moves at `speed` m/s. With `velocimeter` a 0.05 m/s velocity
-/// update follows each fix. Returns
+/// frames get finer). With `velocimeter` a 0.05 m/s velocity update follows each fix. Returns
 /// the fraction of horizontal NEES values in the 95 % band of χ²(2), and their mean.
 fn fly_over_correlated_ground(
     told_footprint_m: f64,
