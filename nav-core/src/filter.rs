@@ -2,9 +2,11 @@
 //!
 //! Navigation frame: local flat-Moon East-North-Up (x east, y north, z up, metres), gravity
 //! along −z. Body frame: x forward, y left, z up. Nominal state: position, velocity, attitude
-//! (unit quaternion body → nav), accelerometer bias, gyro bias, and the error of the current
-//! TRN fix. Error state (18): δp, δv, δθ (small rotation in the nav frame, `q_true = exp(δθ) ⊗
-//! q`), δb_a, δb_g, δf (the fix error: east m, north m, yaw rad).
+//! (unit quaternion body → nav), accelerometer bias, gyro bias, the error of the current TRN
+//! fix and its drift with footprint size. Error state ([`STATE_DIM`]): δp, δv, δθ (small
+//! rotation in the nav frame, `q_true = exp(δθ) ⊗ q`), δb_a, δb_g, δf (the fix error: east m,
+//! north m, yaw rad), δk (a keyframe's position, for odometry offsets) and δd (east, north m per
+//! unit log footprint side).
 //!
 //! Why a fix-error state: successive frames at 1 Hz image mostly the same ground (a 2 km
 //! footprint moves ~80 m per frame), so their fix errors, which come from that ground and from
@@ -18,7 +20,16 @@
 //! descent's frames get finer; see `NavFilter::move_fix_error`). The rest,
 //! `(1 − s)·C`, is the frame's own (its range noise, which keypoints it kept) and is white. A
 //! fix from new ground (`ρ = 0`) is an ordinary independent measurement of covariance `C`; a
-//! fix of the same ground adds only its white part's worth.
+//! fix of the same ground adds only its white part's worth. `s` is the larger of the default
+//! and the fix's [`FixMeasurement::map_share`]: over a noisy map (InSAR) nearly all of a fix's
+//! error is the map's ([`map_noise_share`]).
+//!
+//! As a descent's footprint shrinks, the ground error changes smoothly (the map's error is
+//! averaged over less ground), in one direction over many fixes. The Gauss–Markov step takes
+//! its changes as independent, so without a velocimeter the filter read the trend as a
+//! velocity error and trusted it. The drift state δd carries the trend instead: at each fix the
+//! ground error moves by `Δℓ·δd` (`Δℓ` the change of log footprint side), and δd is itself a
+//! Gauss–Markov process of size [`FilterConfig::fix_scale_drift`] × the ground error's σ.
 //!
 //! Yaw ψ is the rotation of the body x axis about +z from +x (east) towards +y (north). A TRN
 //! fix's heading measured in a north-up tile's pixel axes (from +x towards +y = south) is −ψ.
@@ -29,14 +40,20 @@
 use core::fmt;
 use nalgebra::{Matrix3, SMatrix, SVector, UnitQuaternion, Vector3};
 
-/// Error-state size: δp, δv, δθ, δb_a, δb_g (3 each), the fix error δf (east, north, yaw) and
-/// the keyframe position δk (east, north).
-pub const STATE_DIM: usize = 20;
+/// Error-state size: δp, δv, δθ, δb_a, δb_g (3 each), the fix error δf (east, north, yaw),
+/// the keyframe position δk (east, north) and the fix error's drift with footprint size δd
+/// (east, north).
+pub const STATE_DIM: usize = 22;
 type MatN = SMatrix<f64, STATE_DIM, STATE_DIM>;
 /// Index of the fix-error block in the error state.
 const FIX: usize = 15;
 /// Index of the keyframe-position block in the error state.
 const KEY: usize = 18;
+/// Index of the fix-error drift block (east, north) in the error state.
+const DRIFT: usize = 20;
+/// Correlation length of the fix-error drift in log footprint side: the drift's correlation
+/// between two footprints whose sides differ by the factor `e^Δℓ` is `e^(−|Δℓ|/L)`.
+const DRIFT_LENGTH_LN: f64 = 0.5;
 /// Largest footprint correlation used: a fix always carries some fresh error (the frame's own
 /// range noise is new each time), so its covariance never vanishes.
 pub const MAX_FIX_CORRELATION: f64 = 0.999;
@@ -67,7 +84,17 @@ pub struct FilterConfig {
     /// moving 80 m per fix, truth tiles): successive fix errors correlate 0.94 over LOLA-like
     /// terrain and 0.6 over smooth plains, against a footprint overlap of 0.96; an even split
     /// covers both without making either overconfident (docs/results.md, descent section).
+    /// A floor: a fix over a map with its own height noise carries the larger
+    /// [`FixMeasurement::map_share`].
     pub fix_shared_fraction: f64,
+    /// How fast the ground error of a fix changes as the footprint shrinks or grows: the 1σ
+    /// change per e-fold of footprint side, in units of the ground error's own 1σ. Shrinking a
+    /// footprint averages the map's error over less ground, which changes the fix error
+    /// smoothly, in one direction over many fixes; a filter without this drift (and without a
+    /// velocimeter) reads it as velocity. 0 disables the drift state. Measured on the 16 km
+    /// InSAR descents (session 33, docs/registration.md): over a 0.18–0.32 change of log
+    /// footprint side the fix error moved by 1–2.2 of its σ per unit; 2 takes the upper end.
+    pub fix_scale_drift: f64,
 }
 
 impl Default for FilterConfig {
@@ -82,6 +109,7 @@ impl Default for FilterConfig {
             altitude_gate_chi2: 10.83,
             max_dt_s: 1.0,
             fix_shared_fraction: 0.5,
+            fix_scale_drift: 2.0,
         }
     }
 }
@@ -126,6 +154,33 @@ pub struct FixMeasurement {
     /// the flyer must move before the next fix sees new ground. 0 or less: this fix's error is
     /// independent of the previous fix's.
     pub footprint_m: f64,
+    /// Share of the covariance that comes from the map's own height noise, in [0, 1]
+    /// ([`map_noise_share`]; 0 on a map that claims none). That error belongs to the ground
+    /// too: the filter carries the larger of this and
+    /// [`FilterConfig::fix_shared_fraction`] as shared. Non-finite values are refused.
+    pub map_share: f64,
+}
+
+/// Share of a fix's error due to the map's own height noise rather than the frame's: the two
+/// white noises' powers per unit area, `m` = [`crate::TileHeader::noise_power_m4`] (m⁴) and
+/// the frame's range noise `frame_noise_m`² × its ground pixel `frame_pixel_m`², compared as
+/// `m / (m + f)`. Both go through the same smoothing and slope before registration, which
+/// scales them alike, so their ratio is the ratio of what they leave in the fix. In [0, 1]; 0
+/// without map noise or for non-finite or negative input (or a pixel of 0), 1 for a noiseless
+/// frame over a noisy map.
+///
+/// Why it matters: on InSAR maps successive fixes' errors are nearly all the map's (their
+/// fix-to-fix change is 1–8 % of their variance at one fix per second, against ~100 % over
+/// truth-built tiles; docs/registration.md, session 33), so averaging them as if half were new
+/// each time made the filter overconfident.
+pub fn map_noise_share(map_noise_power_m4: f64, frame_noise_m: f64, frame_pixel_m: f64) -> f64 {
+    let m = map_noise_power_m4;
+    let f = frame_noise_m * frame_noise_m * frame_pixel_m * frame_pixel_m;
+    let frame_ok = frame_noise_m >= 0.0 && frame_pixel_m > 0.0 && f.is_finite();
+    if !(m.is_finite() && m > 0.0 && frame_ok) {
+        return 0.0;
+    }
+    (m / (m + f)).clamp(0.0, 1.0)
 }
 
 /// A keyframe-relative fix (odometry): the flyer's horizontal displacement since the keyframe
@@ -224,6 +279,10 @@ pub struct NavFilter {
     /// before any update: the floor the top-up of [`Self::move_fix_error`] compares a new fix's
     /// share with. The carried covariance after updates is smaller.
     fix_ground_var: [f64; 3],
+    /// Estimated drift of the fix error per unit log footprint side (east, north, m).
+    fix_drift: [f64; 2],
+    /// Modelled prior variance of the drift (east, north, m²), as `fix_ground_var`.
+    drift_var: [f64; 2],
     /// Horizontal position (east, north, m) cloned at the current keyframe, if any.
     key: Option<[f64; 2]>,
     cov: MatN,
@@ -270,6 +329,8 @@ impl NavFilter {
             fix_err: Vector3::zeros(),
             last_fix: ([0.0; 2], 0.0),
             fix_ground_var: [0.0; 3],
+            fix_drift: [0.0; 2],
+            drift_var: [0.0; 2],
             key: None,
             cov,
             cfg,
@@ -402,6 +463,8 @@ impl NavFilter {
         self.ba += dx.fixed_rows::<3>(9);
         self.bg += dx.fixed_rows::<3>(12);
         self.fix_err += dx.fixed_rows::<3>(FIX);
+        self.fix_drift[0] += at(&dx, DRIFT, 0);
+        self.fix_drift[1] += at(&dx, DRIFT + 1, 0);
         if let Some(k) = &mut self.key {
             k[0] += at(&dx, KEY, 0);
             k[1] += at(&dx, KEY + 1, 0);
@@ -428,6 +491,7 @@ impl NavFilter {
             c[1][1],
             z.yaw_sigma_rad,
             z.footprint_m,
+            z.map_share,
         ];
         if !vals.iter().all(|v| v.is_finite()) {
             return Err(FilterError::NotFinite);
@@ -448,7 +512,12 @@ impl NavFilter {
         if cf.cholesky().is_none() {
             return Err(FilterError::Singular);
         }
-        let shared = self.move_fix_error([z.x_m, z.y_m], z.footprint_m, &cf);
+        let shared = self
+            .cfg
+            .fix_shared_fraction
+            .max(z.map_share)
+            .clamp(0.0, 1.0);
+        self.move_fix_error([z.x_m, z.y_m], z.footprint_m, &cf, shared);
         let y = SVector::<f64, 3>::new(
             z.x_m - self.p.x - self.fix_err.x,
             z.y_m - self.p.y - self.fix_err.y,
@@ -485,11 +554,23 @@ impl NavFilter {
     /// cost the velocimeter runs 4–9 points; also shrinking it when a fix claims less made
     /// the filter overconfident after momentarily confident fixes (docs/registration.md,
     /// session 32). A limit: one fix with a momentarily large σ raises `g_k`, which then decays
-    /// only as the ground changes. Returns the shared fraction `s`.
-    fn move_fix_error(&mut self, centre: [f64; 2], footprint_m: f64, cf: &Matrix3<f64>) -> f64 {
+    /// only as the ground changes.
+    fn move_fix_error(
+        &mut self,
+        centre: [f64; 2],
+        footprint_m: f64,
+        cf: &Matrix3<f64>,
+        shared: f64,
+    ) {
         let rho = footprint_correlation(self.last_fix.0, self.last_fix.1, centre, footprint_m);
+        // Change of log footprint side since the last fix (0 without one or on new ground).
+        let dl = if rho > 0.0 && self.last_fix.1 > 0.0 && footprint_m > 0.0 {
+            libm::log(footprint_m / self.last_fix.1)
+        } else {
+            0.0
+        };
+        self.move_drift(dl, rho, cf, shared);
         self.last_fix = (centre, footprint_m.max(0.0));
-        let shared = self.cfg.fix_shared_fraction.clamp(0.0, 1.0);
         // A non-finite variance describes no ground error; it must not poison the model.
         let target = [0, 1, 2].map(|k| {
             let t = shared * cf.get((k, k)).copied().unwrap_or(0.0).max(0.0);
@@ -530,7 +611,70 @@ impl NavFilter {
         }
         self.fix_err *= rho;
         self.symmetrise();
-        shared
+    }
+
+    /// The drift part of [`Self::move_fix_error`]: the fix error moves by `Δℓ·δd` (`Δℓ` the
+    /// change of log footprint side), then the drift keeps `ρ·e^(−|Δℓ|/L)` of itself and gains
+    /// fresh error towards its modelled variance `k²·g` (`k` = `fix_scale_drift`, `g` the
+    /// ground error's modelled variance before this step, per axis).
+    fn move_drift(&mut self, dl: f64, rho: f64, cf: &Matrix3<f64>, shared: f64) {
+        let k = self.cfg.fix_scale_drift;
+        if !(k.is_finite() && k > 0.0 && dl.is_finite()) {
+            return;
+        }
+        // Φ: δf_xy += Δℓ·δd_xy.
+        let mut phi = MatN::identity();
+        for a in 0..2 {
+            if let Some(v) = phi.get_mut((FIX + a, DRIFT + a)) {
+                *v = dl;
+            }
+        }
+        self.cov = phi * self.cov * phi.transpose();
+        self.fix_err.x += dl * self.fix_drift[0];
+        self.fix_err.y += dl * self.fix_drift[1];
+        let rd = rho * libm::exp(-dl.abs() / DRIFT_LENGTH_LN);
+        for i in 0..STATE_DIM {
+            for a in 0..2 {
+                if let Some(v) = self.cov.get_mut((DRIFT + a, i)) {
+                    *v *= rd;
+                }
+                if let Some(v) = self.cov.get_mut((i, DRIFT + a)) {
+                    *v *= rd;
+                }
+            }
+        }
+        for a in 0..2 {
+            // The larger of the carried model and the new fix's share sets the drift's size.
+            let t = shared * cf.get((a, a)).copied().unwrap_or(0.0).max(0.0);
+            let g = self.fix_ground_var.get(a).copied().unwrap_or(0.0).max(t);
+            let var = k * k * g;
+            let Some(m) = self.drift_var.get_mut(a) else {
+                continue;
+            };
+            if !var.is_finite() {
+                continue;
+            }
+            // As for the fix error: a drift model smaller than the new size is topped up.
+            let add = if var > *m || !m.is_finite() {
+                let extra = if m.is_finite() {
+                    rd * rd * (var - *m)
+                } else {
+                    0.0
+                };
+                *m = var;
+                (1.0 - rd * rd) * var + extra
+            } else {
+                *m = rd * rd * *m + (1.0 - rd * rd) * var;
+                (1.0 - rd * rd) * var
+            };
+            if let Some(v) = self.cov.get_mut((DRIFT + a, DRIFT + a)) {
+                *v += add;
+            }
+            if let Some(d) = self.fix_drift.get_mut(a) {
+                *d *= rd;
+            }
+        }
+        self.symmetrise();
     }
 
     /// Capture a keyframe: the current horizontal position (and its error) is cloned into the
@@ -609,7 +753,8 @@ impl NavFilter {
         }
         let cf = Matrix3::new(c[0][0], cxy, 0.0, cxy, c[1][1], 0.0, 0.0, 0.0, 0.0);
         let centre = [self.p.x, self.p.y];
-        let shared = self.move_fix_error(centre, z.footprint_m, &cf);
+        let shared = self.cfg.fix_shared_fraction.clamp(0.0, 1.0);
+        self.move_fix_error(centre, z.footprint_m, &cf, shared);
         let y = SVector::<f64, 2>::new(
             z.east_m - (self.p.x - key[0]) - self.fix_err.x,
             z.north_m - (self.p.y - key[1]) - self.fix_err.y,

@@ -215,6 +215,8 @@ impl<const BYTES: usize> Keyframe<BYTES> {
             smoothing_m: 0.0,
             // The keyframe's own position error is the filter's cloned state, not the tile's.
             reference_sigma_m: [0.0; 2],
+            // The keyframe's noise is a frame's; offsets carry the filter's default share.
+            height_noise_m: 0.0,
         };
         let len = crate::tile::write_tile_with_raster(
             &header,

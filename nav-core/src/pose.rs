@@ -179,6 +179,10 @@ pub struct Fix {
     /// not from feature matches: `inliers` and `residual_rms_px` are 0, and the covariances
     /// are the refinement's own ([`crate::refine::Refined::center_cov_tile_px2`]).
     pub area_search: bool,
+    /// The tile's height-noise power ([`TileHeader::noise_power_m4`]), m⁴: with the frame's
+    /// own, it says how much of this fix's error successive fixes of the same ground share
+    /// (`filter::map_noise_share`). 0 on a map that claims no noise.
+    pub map_noise_power_m4: f64,
 }
 
 impl Fix {
@@ -217,6 +221,7 @@ impl Fix {
             heading_sigma_rad: r.rotation_sigma_rad,
             scale_sigma: r.scale_sigma,
             refined: true,
+            map_noise_power_m4: header.noise_power_m4(),
             ..*self
         }
     }
@@ -271,6 +276,7 @@ impl Fix {
             residual_rms_px: 0.0,
             refined: true,
             area_search: true,
+            map_noise_power_m4: header.noise_power_m4(),
         }
     }
 }
@@ -354,5 +360,6 @@ pub fn make_fix(
         residual_rms_px: r.residual_rms_px,
         refined: false,
         area_search: false,
+        map_noise_power_m4: header.noise_power_m4(),
     })
 }

@@ -819,6 +819,7 @@ mod tests {
             upright: false,
             smoothing_m: 0.0,
             reference_sigma_m: [0.0; 2],
+            height_noise_m: 0.0,
         };
         let mut buf = vec![0u8; tile_len_with_raster(512, 0, W * W)];
         let n = write_tile_with_raster(&header, &[], Some(&raster), &mut buf).unwrap();

@@ -28,7 +28,7 @@ use serde::{Deserialize, Serialize};
 /// Magic bytes at offset 0.
 pub const TILE_MAGIC: [u8; 8] = *b"UMBRATIL";
 /// Format version this code reads and writes.
-pub const TILE_FORMAT_VERSION: u16 = 4;
+pub const TILE_FORMAT_VERSION: u16 = 5;
 /// Bytes before the header.
 pub const PREAMBLE_LEN: usize = 20;
 /// Most raster pixels a tile may hold (a 16 384² map; 512 MiB, far beyond any flash).
@@ -95,12 +95,22 @@ pub struct TileHeader<'a> {
     /// it never shows in a fix's residuals; every fix adds it to its covariance. 0 = none
     /// claimed; at most [`MAX_REFERENCE_SIGMA_M`].
     pub reference_sigma_m: [f32; 2],
+    /// The map's own height noise: 1σ, metres, per tile pixel, of white noise with the map
+    /// noise's power per unit area (a DEM filter that averaged neighbouring cells lowered their
+    /// σ, not this power; e.g. an InSAR DEM's phase noise through its Cramér–Rao bound, undone
+    /// for its filter). Frames registered on overlapping ground see the same noise, so a fix
+    /// error it causes is shared by successive fixes, not new at each
+    /// ([`Self::noise_power_m4`], `filter::map_noise_share`). 0 = none claimed (a map without
+    /// noise of its own); at most [`MAX_HEIGHT_NOISE_M`].
+    pub height_noise_m: f32,
 }
 
 /// Largest [`TileHeader::smoothing_m`] accepted, metres.
 pub const MAX_SMOOTHING_M: f32 = 10_000.0;
 /// Largest [`TileHeader::reference_sigma_m`] accepted, metres.
 pub const MAX_REFERENCE_SIGMA_M: f32 = 10_000.0;
+/// Largest [`TileHeader::height_noise_m`] accepted, metres.
+pub const MAX_HEIGHT_NOISE_M: f32 = 10_000.0;
 
 impl TileHeader<'_> {
     /// The SURF settings the tile was built with (frames should use the same).
@@ -137,6 +147,13 @@ impl TileHeader<'_> {
             v(self.reference_sigma_m[1], self.pixel_y_m),
         ]
     }
+    /// The map's white height-noise power per unit area, m²·m² ([`Self::height_noise_m`]² ×
+    /// pixel area): what a smoothing of any width leaves of the noise scales with it, so it
+    /// compares directly with a frame's own (range noise² × frame pixel area).
+    pub fn noise_power_m4(&self) -> f64 {
+        let s = self.height_noise_m as f64;
+        s * s * libm::fabs(self.pixel_x_m * self.pixel_y_m)
+    }
     /// Whether the header's own fields are in range (shared by the parser and the writer).
     fn ranges_ok(&self) -> bool {
         let sigma_ok = |s: f32| (0.0..=MAX_REFERENCE_SIGMA_M).contains(&s);
@@ -144,6 +161,7 @@ impl TileHeader<'_> {
             && (0.0..=MAX_SMOOTHING_M).contains(&self.smoothing_m)
             && sigma_ok(self.reference_sigma_m[0])
             && sigma_ok(self.reference_sigma_m[1])
+            && (0.0..=MAX_HEIGHT_NOISE_M).contains(&self.height_noise_m)
     }
 }
 

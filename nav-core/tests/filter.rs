@@ -1,7 +1,9 @@
 //! The navigation filter on a simulated flight: IMU with bias and noise at 100 Hz, TRN fixes at
 //! 1 Hz with 10 % gross outliers. Checks consistency (NEES), outlier gating and accuracy.
 
-use nav_core::filter::{FilterConfig, FixMeasurement, InitialState, NavFilter, UpdateOutcome};
+use nav_core::filter::{
+    FilterConfig, FixMeasurement, InitialState, NavFilter, UpdateOutcome, map_noise_share,
+};
 use nav_core::rng::Pcg32;
 
 fn gauss(r: &mut Pcg32) -> f64 {
@@ -61,6 +63,7 @@ fn filter_is_consistent_and_rejects_outliers() {
                 position_cov_m2: [[sx * sx, 0.0], [0.0, sy * sy]],
                 yaw_sigma_rad: 0.5f64.to_radians(),
                 footprint_m: 0.0,
+                map_share: 0.0,
             };
             if outlier {
                 m.x_m += 300.0;
@@ -137,6 +140,7 @@ fn bad_inputs_are_refused() {
         position_cov_m2: [[-1.0, 0.0], [0.0, -1.0]],
         yaw_sigma_rad: 0.0,
         footprint_m: 100.0,
+        map_share: 0.0,
     };
     assert!(
         f.update_fix(&m).is_err() || matches!(f.update_fix(&m), Ok(UpdateOutcome::Rejected { .. }))
@@ -145,42 +149,129 @@ fn bad_inputs_are_refused() {
     assert!(f.position_m().iter().all(|v| v.is_finite()));
 }
 
-/// Fly a straight level line at `speed` m/s with 1 Hz fixes whose errors come mostly from the
-/// ground, as TRN's do: half of each fix's error variance is the mean of fixed per-point errors
-/// of the ground points inside its 400 m footprint (so successive fixes, 20 m apart at 20 m/s,
-/// share 95 % of their points; 4 m apart at 4 m/s, 99 %), half is the frame's own, new each time (the split the filter's default
-/// `fix_shared_fraction` assumes). The filter is told the footprint `told_footprint_m` (0:
-/// fixes independent). The ground's errors, the frame's and the σ each fix reports all grow
-/// linearly along the track from 1× to `growth`× (harder ground ahead, as on a descent whose
-/// frames get finer). With `velocimeter` a 0.05 m/s velocity update follows each fix. Returns
-/// the fraction of horizontal NEES values in the 95 % band of χ²(2), and their mean.
-fn fly_over_correlated_ground(
-    told_footprint_m: f64,
+/// One simulated flight over ground whose errors TRN fixes share ([`fly_over_correlated_ground`]).
+#[derive(Clone, Copy)]
+struct Flight {
+    /// The footprint is told to the filter (else 0: fixes taken as independent).
+    told_footprint: bool,
+    /// Every fix's error and reported σ grow linearly along the track from 1× to this.
     growth: f64,
+    /// Ground speed, m/s.
     speed: f64,
+    /// A 0.05 m/s velocity update follows each fix.
     velocimeter: bool,
+    /// Share of a 400 m footprint's fix error variance that is the ground's (the rest is the
+    /// frame's own, new each time).
+    ground_share: f64,
+    /// `FixMeasurement::map_share` told to the filter.
+    told_share: f64,
+    /// The footprint side shrinks linearly along the track from 400 m to 400 m / this (a
+    /// descent's frames getting finer): the fix error, the mean of the ground points' errors
+    /// inside it, changes smoothly and its σ grows as fewer points average.
+    shrink: f64,
+    /// `FilterConfig::fix_scale_drift`.
+    drift: f64,
+    /// The ground's error is a smooth field (random waves 300–1200 m long, as a map's
+    /// smoothed error is) rather than independent per point: the fix error then moves
+    /// smoothly as the footprint moves or shrinks.
+    smooth: bool,
     seed: u64,
-) -> (f64, f64) {
-    let cfg = FilterConfig::default();
-    let mut rng = Pcg32::new(seed, 7);
+}
+
+impl Flight {
+    /// The shape session 32's tests flew: half ground, half frame, steady footprint.
+    fn steady(told_footprint: bool, growth: f64, speed: f64, velocimeter: bool, seed: u64) -> Self {
+        Self {
+            told_footprint,
+            growth,
+            speed,
+            velocimeter,
+            ground_share: 0.5,
+            told_share: 0.0,
+            shrink: 1.0,
+            drift: FilterConfig::default().fix_scale_drift,
+            smooth: false,
+            seed,
+        }
+    }
+}
+
+/// Fly a straight level line at `speed` m/s with 1 Hz fixes whose errors come mostly from the
+/// ground, as TRN's do: the ground's share of each fix's error is the mean of fixed per-point
+/// errors of the ground points inside its footprint (400 m at first, so successive fixes, 20 m
+/// apart at 20 m/s, share 95 % of their points; 4 m apart at 4 m/s, 99 %), the rest is the
+/// frame's own, new each time. Returns the fraction of horizontal NEES values in the 95 % band
+/// of χ²(2), and their mean.
+fn fly_over_correlated_ground(fl: Flight) -> (f64, f64) {
+    let cfg = FilterConfig {
+        fix_scale_drift: fl.drift,
+        ..FilterConfig::default()
+    };
+    let speed = fl.speed;
+    let mut rng = Pcg32::new(fl.seed, 7);
     let (foot, sigma, per_foot) = (400.0f64, 4.0f64, 200.0f64);
     // Ground points over the track's box with margins: 1 per (400²/200) m².
     let (x0, x1, y0, y1) = (-400.0, 3000.0, -400.0, 400.0);
     let n_pts = ((x1 - x0) * (y1 - y0) / (foot * foot / per_foot)) as usize;
     let uni = |r: &mut Pcg32| r.next_u32() as f64 / 4_294_967_296.0;
+    // Per-point error such that the mean over a 400 m footprint's `per_foot` points has
+    // variance `ground_share`·σ².
+    let s_pt = sigma * (fl.ground_share * per_foot).sqrt();
     let pts: Vec<[f64; 4]> = (0..n_pts)
         .map(|_| {
             let px = x0 + (x1 - x0) * uni(&mut rng);
             let py = y0 + (y1 - y0) * uni(&mut rng);
-            // Per-point error such that the mean over `per_foot` points has 1σ `sigma`/√2.
-            let s = sigma * (0.5 * per_foot).sqrt();
-            [px, py, s * gauss(&mut rng), s * gauss(&mut rng)]
+            [px, py, s_pt * gauss(&mut rng), s_pt * gauss(&mut rng)]
         })
         .collect();
-    let fix_error = |x: f64, y: f64| {
+    // The smooth field: per axis, 24 waves (wavenumber, direction, phase); the mean of
+    // cos(k·r + φ) over a square of side L centred at c is cos(k·c + φ)·sinc(k_x L/2)·sinc(k_y L/2).
+    // (Drawn only for a smooth flight, so the other flights' random streams stay as they were.)
+    let waves: Vec<[f64; 4]> = (0..if fl.smooth { 48 } else { 0 })
+        .map(|_| {
+            let lambda = 300.0 + 900.0 * uni(&mut rng);
+            let dir = core::f64::consts::TAU * uni(&mut rng);
+            let k = core::f64::consts::TAU / lambda;
+            [
+                k * dir.cos(),
+                k * dir.sin(),
+                core::f64::consts::TAU * uni(&mut rng),
+                0.0,
+            ]
+        })
+        .collect();
+    let sinc = |u: f64| if u.abs() < 1e-9 { 1.0 } else { u.sin() / u };
+    let gain = |w: &[f64; 4], side: f64| sinc(0.5 * w[0] * side) * sinc(0.5 * w[1] * side);
+    // Variance of one axis's footprint mean (amplitude 1 per wave): Σ ½·gain².
+    let wave_var = |axis: usize, side: f64| {
+        waves
+            .iter()
+            .skip(24 * axis)
+            .take(24)
+            .map(|w| 0.5 * gain(w, side).powi(2))
+            .sum::<f64>()
+    };
+    // Amplitude that makes the 400 m footprint's mean carry `ground_share`·σ² per axis.
+    let amp = [0, 1].map(|a| (sigma * sigma * fl.ground_share / wave_var(a, foot)).sqrt());
+    let smooth_error = |x: f64, y: f64, side: f64| {
+        let e = |a: usize| {
+            waves
+                .iter()
+                .skip(24 * a)
+                .take(24)
+                .map(|w| (w[0] * x + w[1] * y + w[2]).cos() * gain(w, side))
+                .sum::<f64>()
+                * amp[a]
+        };
+        (e(0), e(1))
+    };
+    let fix_error = |x: f64, y: f64, side: f64| {
+        if fl.smooth {
+            return smooth_error(x, y, side);
+        }
         let (mut ex, mut ey, mut n) = (0.0, 0.0, 0.0);
         for p in &pts {
-            if (p[0] - x).abs() <= 0.5 * foot && (p[1] - y).abs() <= 0.5 * foot {
+            if (p[0] - x).abs() <= 0.5 * side && (p[1] - y).abs() <= 0.5 * side {
                 ex += p[2];
                 ey += p[3];
                 n += 1.0;
@@ -217,25 +308,37 @@ fn fly_over_correlated_ground(
         let gyro = [0, 1, 2].map(|_| cfg.gyro_noise / dt.sqrt() * gauss(&mut rng));
         f.propagate(dt, accel, gyro).unwrap();
         if step % 100 == 0 {
-            let k = 1.0 + (growth - 1.0) * step as f64 / 12_000.0;
-            let (ex, ey) = fix_error(x, 0.0);
-            let own = sigma * 0.5f64.sqrt();
+            let along = step as f64 / 12_000.0;
+            let k = 1.0 + (fl.growth - 1.0) * along;
+            let side = foot / (1.0 + (fl.shrink - 1.0) * along);
+            let (ex, ey) = fix_error(x, 0.0, side);
+            let own = sigma * (1.0 - fl.ground_share).sqrt();
             let (ex, ey) = (
                 k * (ex + own * gauss(&mut rng)),
                 k * (ey + own * gauss(&mut rng)),
             );
-            let s2 = (k * sigma).powi(2);
+            // Fewer points average in a smaller footprint: the ground's variance grows (for
+            // the smooth field, as its waves' gains do; the larger axis is reported).
+            let ground_var = if fl.smooth {
+                (0..2)
+                    .map(|a| amp[a] * amp[a] * wave_var(a, side))
+                    .fold(0.0, f64::max)
+            } else {
+                sigma * sigma * fl.ground_share * (foot / side).powi(2)
+            };
+            let s2 = k * k * (ground_var + own * own);
             let m = FixMeasurement {
                 x_m: x + ex,
                 y_m: ey,
                 yaw_rad: 0.2f64.to_radians() * gauss(&mut rng),
                 position_cov_m2: [[s2, 0.0], [0.0, s2]],
                 yaw_sigma_rad: 0.2f64.to_radians(),
-                footprint_m: told_footprint_m,
+                footprint_m: if fl.told_footprint { side } else { 0.0 },
+                map_share: fl.told_share,
             };
             f.update_fix(&m).unwrap();
             f.update_altitude(z + gauss(&mut rng), 1.0).unwrap();
-            if velocimeter {
+            if fl.velocimeter {
                 f.update_velocity(
                     [speed + 0.05 * gauss(&mut rng), 0.05 * gauss(&mut rng), 0.0],
                     0.05,
@@ -266,8 +369,8 @@ fn fixes_of_shared_ground_do_not_make_the_filter_overconfident() {
     let (mut told, mut blind) = ((0.0, 0.0), (0.0, 0.0));
     let seeds = [11u64, 12, 13, 14, 15, 16];
     for &seed in &seeds {
-        let a = fly_over_correlated_ground(400.0, 1.0, 20.0, true, seed);
-        let b = fly_over_correlated_ground(0.0, 1.0, 20.0, true, seed);
+        let a = fly_over_correlated_ground(Flight::steady(true, 1.0, 20.0, true, seed));
+        let b = fly_over_correlated_ground(Flight::steady(false, 1.0, 20.0, true, seed));
         println!(
             "seed {seed}: footprint told: {:.1} % in band, mean NEES {:.2}; fixes taken as independent: {:.1} %, {:.2}",
             a.0 * 100.0,
@@ -304,13 +407,119 @@ fn fixes_whose_ground_error_grows_keep_the_filter_consistent() {
     let (mut band, mut mean) = (0.0, 0.0);
     let seeds = [21u64, 22, 23, 24, 25, 26, 27, 28, 29, 30, 31, 32];
     for &seed in &seeds {
-        let (b, m) = fly_over_correlated_ground(400.0, 5.0, 4.0, false, seed);
+        let (b, m) = fly_over_correlated_ground(Flight::steady(true, 5.0, 4.0, false, seed));
         println!("seed {seed}: {:.1} % in band, mean NEES {m:.2}", b * 100.0);
         band += b / seeds.len() as f64;
         mean += m / seeds.len() as f64;
     }
     assert!(band >= 0.90, "{:.3} in band", band);
     assert!((0.7..=3.5).contains(&mean), "mean NEES {mean:.2}");
+}
+
+/// Mean over `seeds` of (fraction in band, mean NEES) for `fl` flown at each seed.
+fn pooled(fl: Flight, seeds: &[u64]) -> (f64, f64) {
+    let (mut band, mut mean) = (0.0, 0.0);
+    for &seed in seeds {
+        let (b, m) = fly_over_correlated_ground(Flight { seed, ..fl });
+        band += b / seeds.len() as f64;
+        mean += m / seeds.len() as f64;
+    }
+    (band, mean)
+}
+
+#[test]
+fn fixes_over_a_noisy_map_are_shared_as_the_map_says() {
+    // An InSAR-like map: 98 % of a fix's error is the map's, seen again by the next fix. Told
+    // that share, the filter stays consistent; left at the default half, it averages the
+    // map's error as if half were new each second and grows overconfident.
+    let seeds = [41u64, 42, 43, 44, 45, 46];
+    let base = Flight {
+        ground_share: 0.98,
+        ..Flight::steady(true, 1.0, 20.0, true, 0)
+    };
+    let told = pooled(
+        Flight {
+            told_share: 0.98,
+            ..base
+        },
+        &seeds,
+    );
+    let untold = pooled(base, &seeds);
+    println!(
+        "map share told: {:.1} % in band, mean NEES {:.2}; default half: {:.1} %, {:.2}",
+        told.0 * 100.0,
+        told.1,
+        untold.0 * 100.0,
+        untold.1
+    );
+    assert!(told.0 >= 0.90, "told: {:.3} in band", told.0);
+    assert!(
+        (0.7..=3.5).contains(&told.1),
+        "told: mean NEES {:.2}",
+        told.1
+    );
+    assert!(
+        untold.1 > 1.5 * told.1,
+        "the default half was not overconfident: {untold:?} vs {told:?}"
+    );
+}
+
+#[test]
+fn a_shrinking_footprint_error_is_not_read_as_velocity() {
+    // The descent without velocimeter over a noisy map: the footprint shrinks fivefold, so
+    // each fix averages the map's smooth error over less ground and the fix error wanders
+    // smoothly, in one direction for many fixes. Without the drift state the filter explains
+    // that by a velocity error it then trusts (measured: 94.8 % in band with it, 90.6 %
+    // without).
+    let seeds = [51u64, 52, 53, 54, 55, 56, 57, 58];
+    let base = Flight {
+        ground_share: 0.98,
+        told_share: 0.98,
+        shrink: 5.0,
+        smooth: true,
+        ..Flight::steady(true, 1.0, 4.0, false, 0)
+    };
+    let with = pooled(base, &seeds);
+    let without = pooled(Flight { drift: 0.0, ..base }, &seeds);
+    println!(
+        "drift state: {:.1} % in band, mean NEES {:.2}; none: {:.1} %, {:.2}",
+        with.0 * 100.0,
+        with.1,
+        without.0 * 100.0,
+        without.1
+    );
+    assert!(with.0 >= 0.92, "with the drift: {:.3} in band", with.0);
+    assert!(
+        (0.7..=3.5).contains(&with.1),
+        "with the drift: mean NEES {:.2}",
+        with.1
+    );
+    assert!(
+        with.0 >= without.0 + 0.02 && without.1 > with.1,
+        "the drift state did not help: {without:?} vs {with:?}"
+    );
+}
+
+#[test]
+fn map_noise_share_weighs_the_map_against_the_frame() {
+    // No map noise: nothing beyond the default share. Equal powers: half.
+    assert_eq!(map_noise_share(0.0, 0.5, 10.0), 0.0);
+    let m = 0.5f64 * 0.5 * 10.0 * 10.0;
+    assert!((map_noise_share(m, 0.5, 10.0) - 0.5).abs() < 1e-12);
+    // The default radar's InSAR map (1.64 m white-equivalent at 20 m) against a 0.5 m frame
+    // at 10 m pixels: 98 % the map's. A finer frame leaves even less of its own.
+    let insar = 1.64f64 * 1.64 * 400.0;
+    let a = map_noise_share(insar, 0.5, 10.0);
+    assert!((0.97..0.99).contains(&a), "{a}");
+    assert!(map_noise_share(insar, 0.5, 5.0) > a);
+    // A noiseless frame over a noisy map: all the map's. Bad input: no claim.
+    assert_eq!(map_noise_share(insar, 0.0, 10.0), 1.0);
+    for bad in [f64::NAN, f64::INFINITY, -1.0] {
+        assert_eq!(map_noise_share(bad, 0.5, 10.0), 0.0);
+        assert_eq!(map_noise_share(insar, bad, 10.0), 0.0);
+        assert_eq!(map_noise_share(insar, 0.5, bad), 0.0);
+    }
+    assert_eq!(map_noise_share(insar, 0.5, 0.0), 0.0);
 }
 
 #[test]

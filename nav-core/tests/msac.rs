@@ -30,6 +30,7 @@ const HEADER: TileHeader<'static> = TileHeader {
     upright: false,
     smoothing_m: 0.0,
     reference_sigma_m: [0.0; 2],
+    height_noise_m: 0.0,
 };
 
 /// `n_true` correspondences of X = 0.5·R(θ)·x + t with 0.3 px noise, plus `n_out` random pairs.
@@ -178,6 +179,7 @@ fn reference_error_adds_to_the_fix_covariance() {
     let bare = fix_with(&HEADER);
     let claimed = TileHeader {
         reference_sigma_m: [3.0, 4.0],
+        height_noise_m: 0.0,
         ..HEADER
     };
     let with = fix_with(&claimed);

@@ -25,6 +25,7 @@ fn header(n: usize) -> TileHeader<'static> {
         upright: false,
         smoothing_m: 40.0,
         reference_sigma_m: [1.5, 2.0],
+        height_noise_m: 1.25,
     }
 }
 
@@ -76,35 +77,35 @@ fn hex(b: &[u8]) -> String {
 }
 
 /// The first 76 bytes (preamble, header start) and the CRC of a one-feature tile without a
-/// raster, as written by format version 4 (version 3 had no `reference_sigma_m`, version 2
-/// no raster count in the preamble, version 1 no `smoothing_m`).
+/// raster, as written by format version 5 (version 4 had no `height_noise_m`, version 3 no
+/// `reference_sigma_m`, version 2 no raster count in the preamble, version 1 no `smoothing_m`).
 /// A change here is a format change: bump `TILE_FORMAT_VERSION` and `docs/tile-format.md`.
-const GOLDEN_HEAD: &str = "554d42524154494c040061000100000000000000c8019601000000000066f24000000000005be340000000000000344000000000000034c024706f6c61722073746572656f67726170686963";
-const GOLDEN_CRC: &str = "2137c12f";
+const GOLDEN_HEAD: &str = "554d42524154494c050065000100000000000000c8019601000000000066f24000000000005be340000000000000344000000000000034c024706f6c61722073746572656f67726170686963";
+const GOLDEN_CRC: &str = "1dd775f4";
 
 #[test]
 fn golden_bytes() {
     let t = build(1);
-    assert_eq!(t.len(), 404);
+    assert_eq!(t.len(), 408);
     assert_eq!(t.len(), tile_len(t[10] as usize | (t[11] as usize) << 8, 1));
     assert_eq!(&t[..8], b"UMBRATIL");
     assert_eq!(u16::from_le_bytes([t[8], t[9]]), TILE_FORMAT_VERSION);
     assert_eq!(hex(&t[..76]), GOLDEN_HEAD);
     assert_eq!(hex(&t[t.len() - 4..]), GOLDEN_CRC);
-    // The header ends (byte 20 + 97) with smoothing_m 40.0 and reference_sigma_m [1.5, 2.0],
-    // f32 little-endian, then padding to 120.
-    assert_eq!(hex(&t[105..120]), "000020420000c03f00000040000000");
+    // The header ends (byte 20 + 101) with smoothing_m 40.0, reference_sigma_m [1.5, 2.0] and
+    // height_noise_m 1.25, f32 little-endian, then padding to 124.
+    assert_eq!(hex(&t[105..124]), "000020420000c03f000000400000a03f000000");
     // With the raster: its pixel count in the preamble, 2 bytes per pixel after the
     // descriptors, and nothing else moves.
     let r = build_with_raster(1);
-    assert_eq!(r.len(), 404 + 60_000);
+    assert_eq!(r.len(), 408 + 60_000);
     assert_eq!(hex(&r[16..20]), "30750000");
-    assert_eq!(hex(&r[20..400]), hex(&t[20..400]));
-    assert_eq!(hex(&r[400..406]), "000001000200");
+    assert_eq!(hex(&r[20..404]), hex(&t[20..404]));
+    assert_eq!(hex(&r[404..410]), "000001000200");
     assert_eq!(hex(&r[r.len() - 4..]), GOLDEN_RASTER_CRC);
 }
 
-const GOLDEN_RASTER_CRC: &str = "190c3026";
+const GOLDEN_RASTER_CRC: &str = "af155b12";
 
 #[test]
 fn raster_round_trips() {
@@ -179,10 +180,11 @@ fn damage_gives_typed_errors() {
         Tile::parse(&b).unwrap_err(),
         TileError::WrongVersion { found: 1 }
     );
-    // A NaN, negative or huge terrain smoothing or reference σ (the header's last three f32:
-    // smoothing_m, reference_sigma_m x, y) behind a valid checksum.
+    // A NaN, negative or huge terrain smoothing, reference σ or height noise (the header's
+    // last four f32: smoothing_m, reference_sigma_m x, y, height_noise_m) behind a valid
+    // checksum.
     let h_end = 20 + (good[10] as usize | (good[11] as usize) << 8);
-    for field_end in [h_end - 8, h_end - 4, h_end] {
+    for field_end in [h_end - 12, h_end - 8, h_end - 4, h_end] {
         for bad in [f32::NAN, -1.0, f32::INFINITY, 2e4] {
             let mut b = good.clone();
             b[field_end - 4..field_end].copy_from_slice(&bad.to_le_bytes());
@@ -195,12 +197,13 @@ fn damage_gives_typed_errors() {
         }
     }
     let mut buf = vec![0u8; tile_len(512, 1)];
-    for bad in 0..3 {
+    for bad in 0..4 {
         let mut h = header(1);
         match bad {
             0 => h.smoothing_m = -1.0,
             1 => h.reference_sigma_m[0] = f32::NAN,
-            _ => h.reference_sigma_m[1] = -0.5,
+            2 => h.reference_sigma_m[1] = -0.5,
+            _ => h.height_noise_m = f32::INFINITY,
         }
         assert_eq!(
             write_tile(&h, &[feature(0)], &mut buf),

@@ -71,6 +71,7 @@ fn reference() -> (Vec<nav_core::SlopePx>, Vec<u8>) {
         // Slope frames are compared as given: no terrain smoothing, no map error claimed.
         0.0,
         [0.0; 2],
+        0.0,
     )
     .unwrap();
     (slope, tile)

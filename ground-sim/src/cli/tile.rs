@@ -54,6 +54,13 @@ pub struct Args {
     /// the tile's reference error (`ground_sim::reference::reference_sigma_m`).
     #[arg(long, default_value_t = 1.0)]
     pub one_look_share: f64,
+    /// The DEM's own height noise, 1σ per pixel, metres, recorded in the tile (an InSAR DEM:
+    /// its `report.json` → `crlb_height_m` / `crlb_filter_factor`, which `insar` records
+    /// itself; 0 = none,
+    /// e.g. a truth DEM). The navigation filter treats the fix error it causes as the ground's,
+    /// shared by successive fixes (`nav_core::filter::map_noise_share`).
+    #[arg(long, default_value_t = 0.0)]
+    pub height_noise_m: f64,
     /// Most features kept (strongest first).
     #[arg(long, default_value_t = MAX_TILE_FEATURES)]
     pub max_features: usize,
@@ -106,6 +113,7 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         target_m: a.smoothing_m,
         inherent_m: a.inherent_smoothing_m,
         one_look_share: a.one_look_share,
+        height_noise_m: a.height_noise_m,
     };
     let max_features = a.max_features.min(MAX_TILE_FEATURES);
     let mut s = write_reference_with(&r, &a.out, &cfg, max_features, smoothing, 0.0)?;

@@ -10,6 +10,7 @@
 use nav_core::Prior;
 use nav_core::filter::{
     FilterConfig, FixMeasurement, InitialState, NavFilter, OffsetMeasurement, UpdateOutcome,
+    map_noise_share,
 };
 use nav_core::hazard::{AimDecision, CONFIRM_MAX_PIXEL_M, HazardConfig};
 use nav_core::odometry::KeyframePose;
@@ -732,6 +733,12 @@ pub fn fly(
                             yaw_sigma_rad: f.heading_sigma_rad,
                             footprint_m: cfg.sensor.width_px.max(cfg.sensor.height_px) as f64
                                 * pixel_m,
+                            // The map's noise against this frame's own, at its pixel.
+                            map_share: map_noise_share(
+                                f.map_noise_power_m4,
+                                cfg.sensor.range_noise_at(pixel_m),
+                                pixel_m,
+                            ),
                         };
                         fix_m = Some(f.center_geo_m);
                         fix_cov_m2 = Some(cg);

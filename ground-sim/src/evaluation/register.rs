@@ -283,6 +283,7 @@ pub fn register(
         // reference image is the authority (no map error of its own).
         0.0,
         [0.0; 2],
+        0.0,
     )?;
     let tile = Tile::parse(&tile_bytes).map_err(|e| anyhow!("tile: {e}"))?;
     let tile_build_ms = t0.elapsed().as_secs_f64() * 1e3;

@@ -142,6 +142,29 @@ fn save(img: &image::RgbImage, path: &Path) -> anyhow::Result<()> {
         .with_context(|| format!("writing {}", path.display()))
 }
 
+/// The height noise the tile claims, metres: the root mean square of the height Cramér–Rao
+/// bound over the map's valid cells, undone for the DEM filter (÷ `crlb_filter_factor`): a
+/// filter lowers each cell's σ by averaging neighbours but not the noise's power per unit
+/// area, which is what registration at the tile's coarser smoothing sees. 0 when no cell is
+/// valid. From the radar's own coherence, not the truth, so a real mission has it too.
+pub fn white_noise_m(p: &InsarProduct) -> f64 {
+    let (sum, n) = p
+        .dem
+        .heights_m()
+        .iter()
+        .zip(p.crlb_m.heights_m())
+        .filter(|(z, c)| z.is_finite() && c.is_finite())
+        .fold((0.0f64, 0usize), |(s, n), (_, c)| {
+            (s + f64::from(*c).powi(2), n + 1)
+        });
+    let f = p.crlb_filter_factor;
+    if n == 0 || !(f.is_finite() && f > 0.0) {
+        0.0
+    } else {
+        (sum / n as f64).sqrt() / f.min(1.0)
+    }
+}
+
 /// Write every product of `p` into `dir` (compared with `truth`), return the report.
 pub fn write_outputs(
     dir: &Path,
@@ -167,6 +190,7 @@ pub fn write_outputs(
             target_m: crate::reference::INSAR_SMOOTHING_M,
             inherent_m: p.config.inherent_smoothing_m(),
             one_look_share: p.look_fusion.map_or(1.0, |f| f.one_look_share_for_frames()),
+            height_noise_m: white_noise_m(p),
         },
     )
     .context("building the reference tile")?;

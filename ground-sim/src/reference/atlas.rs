@@ -153,6 +153,7 @@ pub fn build_atlas(
                 max_features,
                 h.smoothing_m as f64,
                 h.reference_sigma_m,
+                h.height_noise_m,
             )
         })
         .collect::<Result<_>>()?;

@@ -50,6 +50,8 @@ pub struct TileSummary {
     pub smoothing_m: f64,
     /// The map's own horizontal error the tile claims, 1σ per axis (x, y), metres.
     pub reference_sigma_m: [f32; 2],
+    /// The map's own height noise the tile claims, 1σ per pixel, metres (0 = none).
+    pub height_noise_m: f64,
     /// Of it, the frame-wide error measured by flying frames over the map (`tile
     /// --calibrate-frames`), 1σ per axis, metres; 0 when not calibrated.
     pub frame_wide_sigma_m: f64,
@@ -228,6 +230,10 @@ pub struct Smoothing {
     /// from two opposite looks). Scales the blur term of the tile's reference error
     /// ([`reference_sigma_m`]).
     pub one_look_share: f64,
+    /// The DEM's own height noise, 1σ per pixel of white noise of the same power per unit area,
+    /// metres (an InSAR DEM: `insar::products::white_noise_m`), recorded in the tile
+    /// (`nav_core::TileHeader::height_noise_m`). 0 = none claimed (a truth DEM).
+    pub height_noise_m: f64,
 }
 
 impl Smoothing {
@@ -237,6 +243,7 @@ impl Smoothing {
             target_m: DEFAULT_SMOOTHING_M,
             inherent_m: 0.0,
             one_look_share: 1.0,
+            height_noise_m: 0.0,
         }
     }
     /// σ to apply, metres.
@@ -309,6 +316,15 @@ pub fn write_reference_with(
     if !(frame_wide_m.is_finite() && frame_wide_m >= 0.0) {
         anyhow::bail!("the frame-wide error must be finite and >= 0, got {frame_wide_m}");
     }
+    let noise = smoothing.height_noise_m;
+    if !(noise.is_finite()
+        && (0.0..=f64::from(nav_core::tile::MAX_HEIGHT_NOISE_M)).contains(&noise))
+    {
+        anyhow::bail!(
+            "the map's height noise must be in [0, {}] m, got {noise}",
+            nav_core::tile::MAX_HEIGHT_NOISE_M
+        );
+    }
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let px = reference_slope_px(ref_dem, smoothing.applied_m())?;
     let slope = Dem::new(
@@ -347,6 +363,7 @@ pub fn write_reference_with(
         max_features,
         smoothing.target_m,
         ref_sigma,
+        noise as f32,
     )?;
     let features = Tile::parse(&bytes)
         .map(|t| t.len())
@@ -364,6 +381,7 @@ pub fn write_reference_with(
         octaves: cfg.detector.octaves,
         smoothing_m: smoothing.target_m,
         reference_sigma_m: ref_sigma,
+        height_noise_m: f64::from(noise as f32),
         frame_wide_sigma_m: frame_wide_m,
         smoothing_applied_m: smoothing.applied_m(),
     };

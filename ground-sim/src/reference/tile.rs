@@ -58,7 +58,9 @@ pub fn tile_features(
 /// that frames will be compared with as they are), and the slope image itself as the tile's
 /// reference raster (2 bytes per pixel), which the flyer's dense refinement aligns frames to.
 /// `reference_sigma_m` is the map's own horizontal error the tile claims (x, y; metres; see
-/// `nav_core::TileHeader::reference_sigma_m` and [`super::reference_sigma_m`]).
+/// `nav_core::TileHeader::reference_sigma_m` and [`super::reference_sigma_m`]);
+/// `height_noise_m` the map's own height noise, 1σ per pixel, metres (0 = none claimed; see
+/// `nav_core::TileHeader::height_noise_m`).
 pub fn build_tile(
     slope: &SlopeImage<'_>,
     grid: &GeoGrid,
@@ -66,6 +68,7 @@ pub fn build_tile(
     max_features: usize,
     smoothing_m: f64,
     reference_sigma_m: [f32; 2],
+    height_noise_m: f32,
 ) -> Result<Vec<u8>> {
     let all = tile_features(slope, cfg)?;
     let feats = &all.as_slice()[..all.len().min(max_features)];
@@ -91,6 +94,7 @@ pub fn build_tile(
         upright: cfg.upright,
         smoothing_m: smoothing_m as f32,
         reference_sigma_m,
+        height_noise_m,
     };
     let raster = slope.pixels();
     let mut buf = vec![0u8; tile_len_with_raster(MAX_HEADER_LEN, feats.len(), raster.len())];
