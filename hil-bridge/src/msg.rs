@@ -257,7 +257,8 @@ pub struct Nack {
 /// Affine map frame px → tile px, `[m1, n1, p1, m2, n2, p2]` (nav-core's eq 18 order).
 pub type WireAffine = [f64; 6];
 
-/// A navigation fix (mirrors `nav_core::Fix`, every `f64` bit for bit).
+/// A navigation fix (mirrors `nav_core::Fix`, every `f64` bit for bit, but for
+/// `map_noise_power_m4`, the tile's own figure, which only the ground's filter uses).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct WireFix {

@@ -29,7 +29,8 @@
 //! its changes as independent, so without a velocimeter the filter read the trend as a
 //! velocity error and trusted it. The drift state δd carries the trend instead: at each fix the
 //! ground error moves by `Δℓ·δd` (`Δℓ` the change of log footprint side), and δd is itself a
-//! Gauss–Markov process of size [`FilterConfig::fix_scale_drift`] × the ground error's σ.
+//! Gauss–Markov process (over Δℓ, and restarting with the footprints' overlap like δf) of
+//! size [`FilterConfig::fix_scale_drift`] × the ground error's σ.
 //!
 //! Yaw ψ is the rotation of the body x axis about +z from +x (east) towards +y (north). A TRN
 //! fix's heading measured in a north-up tile's pixel axes (from +x towards +y = south) is −ψ.
@@ -80,12 +81,14 @@ pub struct FilterConfig {
     pub max_dt_s: f64,
     /// Share of a TRN fix's covariance that belongs to the ground under the frame (kept by
     /// the next fix in proportion to the footprints' overlap); the rest is the frame's own
-    /// error, new at every fix. In [0, 1]. Measured on 16 km descents (1 Hz, 2 km frames
-    /// moving 80 m per fix, truth tiles): successive fix errors correlate 0.94 over LOLA-like
-    /// terrain and 0.6 over smooth plains, against a footprint overlap of 0.96; an even split
-    /// covers both without making either overconfident (docs/results.md, descent section).
-    /// A floor: a fix over a map with its own height noise carries the larger
-    /// [`FixMeasurement::map_share`].
+    /// error, new at every fix. In [0, 1]. Session 9 measured successive fix errors over truth
+    /// tiles correlating 0.94 (LOLA-like terrain) and 0.6 (plains) and chose an even split.
+    /// Re-measured in session 33 on the 16 km descents' histories, after the dense refinement
+    /// and the area search changed how fixes err: over truth-built tiles successive errors are
+    /// now nearly independent (their mean squared change one second apart is 1.4–1.6 of the 2
+    /// independence gives), so 0.5 is conservative there; over InSAR maps 95–98 % of a fix's
+    /// error is still there a second later. It is a floor: a fix over a map with its own
+    /// height noise carries the larger [`FixMeasurement::map_share`] on position.
     pub fix_shared_fraction: f64,
     /// How fast the ground error of a fix changes as the footprint shrinks or grows: the 1σ
     /// change per e-fold of footprint side, in units of the ground error's own 1σ. Shrinking a
@@ -93,7 +96,9 @@ pub struct FilterConfig {
     /// smoothly, in one direction over many fixes; a filter without this drift (and without a
     /// velocimeter) reads it as velocity. 0 disables the drift state. Measured on the 16 km
     /// InSAR descents (session 33, docs/registration.md): over a 0.18–0.32 change of log
-    /// footprint side the fix error moved by 1–2.2 of its σ per unit; 2 takes the upper end.
+    /// footprint side, beyond what the lag alone moved it, the fix error moved by 1–2.2 of its
+    /// σ per unit; 2 takes the upper end. Keyframe offsets drift alike (flown without: no
+    /// better landings, a lower final-phase NEES).
     pub fix_scale_drift: f64,
 }
 
@@ -170,7 +175,8 @@ pub struct FixMeasurement {
 /// frame over a noisy map.
 ///
 /// Why it matters: on InSAR maps successive fixes' errors are nearly all the map's (their
-/// fix-to-fix change is 1–8 % of their variance at one fix per second, against ~100 % over
+/// mean squared fix-to-fix change is 3–10 % of their variance at one fix per second, against
+/// 70–80 % of the 2 independent errors give over
 /// truth-built tiles; docs/registration.md, session 33), so averaging them as if half were new
 /// each time made the filter overconfident.
 pub fn map_noise_share(map_noise_power_m4: f64, frame_noise_m: f64, frame_pixel_m: f64) -> f64 {
@@ -300,6 +306,21 @@ fn at<const R: usize, const C: usize>(m: &SMatrix<f64, R, C>, i: usize, j: usize
 
 fn wrap_pi(a: f64) -> f64 {
     libm::remainder(a, core::f64::consts::TAU)
+}
+
+/// The shared part of a fix covariance `cf` (east, north, yaw) for shares `[s_xy, s_yaw]`:
+/// `S^½·cf·S^½` with `S = diag(s_xy, s_xy, s_yaw)` (within a block that is the block times its
+/// share, exactly).
+fn split(cf: &Matrix3<f64>, shared: [f64; 2]) -> Matrix3<f64> {
+    let [sxy, syaw] = shared;
+    Matrix3::from_fn(|i, j| {
+        let s = match (i < 2, j < 2) {
+            (true, true) => sxy,
+            (false, false) => syaw,
+            _ => libm::sqrt(sxy * syaw),
+        };
+        cf.get((i, j)).copied().unwrap_or(0.0) * s
+    })
 }
 
 fn finite3(a: &[f64; 3]) -> bool {
@@ -475,8 +496,10 @@ impl NavFilter {
     /// Update with a TRN fix (east, north, yaw). Gated at `fix_gate_chi2`.
     ///
     /// The fix observes position + fix error: first the fix-error state moves to this fix's
-    /// ground (kept in proportion to the footprints' overlap, fresh error `(1 − ρ²)·C` added,
-    /// `C` the fix's covariance), then the update splits the innovation between the two. A fix
+    /// ground ([`Self::move_fix_error`]: kept in proportion to the footprints' overlap ρ,
+    /// moved by its drift as the footprint's size changes, fresh error `(1 − ρ²)·s·C` added,
+    /// `C` the fix's covariance, `s` the shared share per axis), then the update splits the
+    /// innovation between the two; the white rest `(1 − s)·C` is the measurement noise. A fix
     /// the gate refuses leaves that move in place (the error process is about the ground, which
     /// the flyer has reached either way) and changes nothing else.
     pub fn update_fix(&mut self, z: &FixMeasurement) -> Result<UpdateOutcome, FilterError> {
@@ -512,12 +535,11 @@ impl NavFilter {
         if cf.cholesky().is_none() {
             return Err(FilterError::Singular);
         }
-        let shared = self
-            .cfg
-            .fix_shared_fraction
-            .max(z.map_share)
-            .clamp(0.0, 1.0);
-        self.move_fix_error([z.x_m, z.y_m], z.footprint_m, &cf, shared);
+        // The map's share was measured on position; the heading keeps the default.
+        let s = self.cfg.fix_shared_fraction.clamp(0.0, 1.0);
+        let shared = [s.max(z.map_share).clamp(0.0, 1.0), s];
+        let drift = self.cfg.fix_scale_drift;
+        self.move_fix_error([z.x_m, z.y_m], z.footprint_m, &cf, shared, drift);
         let y = SVector::<f64, 3>::new(
             z.x_m - self.p.x - self.fix_err.x,
             z.y_m - self.p.y - self.fix_err.y,
@@ -530,7 +552,7 @@ impl NavFilter {
             (i, j) if j == FIX + i => 1.0,
             _ => 0.0,
         });
-        let r = cf * (1.0 - shared);
+        let r = cf - split(&cf, shared);
         let r = SMatrix::<f64, 3, 3>::from_fn(|i, j| r.get((i, j)).copied().unwrap_or(0.0));
         self.update(y, h, r, self.cfg.fix_gate_chi2)
     }
@@ -560,7 +582,8 @@ impl NavFilter {
         centre: [f64; 2],
         footprint_m: f64,
         cf: &Matrix3<f64>,
-        shared: f64,
+        shared: [f64; 2],
+        drift: f64,
     ) {
         let rho = footprint_correlation(self.last_fix.0, self.last_fix.1, centre, footprint_m);
         // Change of log footprint side since the last fix (0 without one or on new ground).
@@ -569,13 +592,15 @@ impl NavFilter {
         } else {
             0.0
         };
-        self.move_drift(dl, rho, cf, shared);
-        self.last_fix = (centre, footprint_m.max(0.0));
-        // A non-finite variance describes no ground error; it must not poison the model.
+        // The new fix's ground share per axis. A non-finite variance describes no ground
+        // error; it must not poison the model.
         let target = [0, 1, 2].map(|k| {
-            let t = shared * cf.get((k, k)).copied().unwrap_or(0.0).max(0.0);
+            let s = if k < 2 { shared[0] } else { shared[1] };
+            let t = s * cf.get((k, k)).copied().unwrap_or(0.0).max(0.0);
             if t.is_finite() { t } else { 0.0 }
         });
+        self.move_drift(dl, rho, &target, drift);
+        self.last_fix = (centre, footprint_m.max(0.0));
         // Fresh error beyond the Gauss–Markov step's where the new fix's ground share exceeds
         // the modelled variance: the new error is the carried one plus an independent part.
         let mut extra = [0.0f64; 3];
@@ -601,7 +626,7 @@ impl NavFilter {
                 }
             }
         }
-        let fresh = cf * ((1.0 - rho * rho) * shared);
+        let fresh = split(cf, shared) * (1.0 - rho * rho);
         let mut block = self.cov.fixed_view_mut::<3, 3>(FIX, FIX);
         block += fresh;
         for (k, e) in extra.iter().enumerate() {
@@ -614,24 +639,34 @@ impl NavFilter {
     }
 
     /// The drift part of [`Self::move_fix_error`]: the fix error moves by `Δℓ·δd` (`Δℓ` the
-    /// change of log footprint side), then the drift keeps `ρ·e^(−|Δℓ|/L)` of itself and gains
-    /// fresh error towards its modelled variance `k²·g` (`k` = `fix_scale_drift`, `g` the
-    /// ground error's modelled variance before this step, per axis).
-    fn move_drift(&mut self, dl: f64, rho: f64, cf: &Matrix3<f64>, shared: f64) {
-        let k = self.cfg.fix_scale_drift;
+    /// change of log footprint side), then the drift keeps `ρ·e^(−|Δℓ|/L)` of itself (ρ the
+    /// footprints' overlap: new ground, new drift) and gains fresh error towards its modelled
+    /// variance `k²·g` (`k` = `drift`, `g` per axis the larger of the ground error's modelled
+    /// variance and the new fix's share `target`, or the share alone on new ground, `ρ` = 0).
+    /// The variance the move adds to the fix error is on top of the top-up's (conservative).
+    fn move_drift(&mut self, dl: f64, rho: f64, target: &[f64; 3], k: f64) {
         if !(k.is_finite() && k > 0.0 && dl.is_finite()) {
             return;
         }
-        // Φ: δf_xy += Δℓ·δd_xy.
-        let mut phi = MatN::identity();
-        for a in 0..2 {
-            if let Some(v) = phi.get_mut((FIX + a, DRIFT + a)) {
-                *v = dl;
+        // Φ = I + Δℓ·E (E: δf_xy ← δd_xy) applied as Φ·P·Φᵀ by rows, then columns.
+        if dl != 0.0 {
+            for a in 0..2 {
+                for i in 0..STATE_DIM {
+                    let d = at(&self.cov, DRIFT + a, i);
+                    if let Some(v) = self.cov.get_mut((FIX + a, i)) {
+                        *v += dl * d;
+                    }
+                }
+                for i in 0..STATE_DIM {
+                    let d = at(&self.cov, i, DRIFT + a);
+                    if let Some(v) = self.cov.get_mut((i, FIX + a)) {
+                        *v += dl * d;
+                    }
+                }
             }
+            self.fix_err.x += dl * self.fix_drift[0];
+            self.fix_err.y += dl * self.fix_drift[1];
         }
-        self.cov = phi * self.cov * phi.transpose();
-        self.fix_err.x += dl * self.fix_drift[0];
-        self.fix_err.y += dl * self.fix_drift[1];
         let rd = rho * libm::exp(-dl.abs() / DRIFT_LENGTH_LN);
         for i in 0..STATE_DIM {
             for a in 0..2 {
@@ -643,10 +678,16 @@ impl NavFilter {
                 }
             }
         }
+        for d in &mut self.fix_drift {
+            *d *= rd;
+        }
         for a in 0..2 {
-            // The larger of the carried model and the new fix's share sets the drift's size.
-            let t = shared * cf.get((a, a)).copied().unwrap_or(0.0).max(0.0);
-            let g = self.fix_ground_var.get(a).copied().unwrap_or(0.0).max(t);
+            let t = target.get(a).copied().unwrap_or(0.0);
+            let g = if rho > 0.0 {
+                self.fix_ground_var.get(a).copied().unwrap_or(0.0).max(t)
+            } else {
+                t
+            };
             let var = k * k * g;
             let Some(m) = self.drift_var.get_mut(a) else {
                 continue;
@@ -669,9 +710,6 @@ impl NavFilter {
             };
             if let Some(v) = self.cov.get_mut((DRIFT + a, DRIFT + a)) {
                 *v += add;
-            }
-            if let Some(d) = self.fix_drift.get_mut(a) {
-                *d *= rd;
             }
         }
         self.symmetrise();
@@ -753,8 +791,9 @@ impl NavFilter {
         }
         let cf = Matrix3::new(c[0][0], cxy, 0.0, cxy, c[1][1], 0.0, 0.0, 0.0, 0.0);
         let centre = [self.p.x, self.p.y];
-        let shared = self.cfg.fix_shared_fraction.clamp(0.0, 1.0);
-        self.move_fix_error(centre, z.footprint_m, &cf, shared);
+        let s = self.cfg.fix_shared_fraction.clamp(0.0, 1.0);
+        let drift = self.cfg.fix_scale_drift;
+        self.move_fix_error(centre, z.footprint_m, &cf, [s, s], drift);
         let y = SVector::<f64, 2>::new(
             z.east_m - (self.p.x - key[0]) - self.fix_err.x,
             z.north_m - (self.p.y - key[1]) - self.fix_err.y,
@@ -765,7 +804,7 @@ impl NavFilter {
             (i, j) if j == KEY + i => -1.0,
             _ => 0.0,
         });
-        let r = c2 * (1.0 - shared);
+        let r = c2 * (1.0 - s);
         let r = SMatrix::<f64, 2, 2>::from_fn(|i, j| r.get((i, j)).copied().unwrap_or(0.0));
         self.update(y, h, r, self.cfg.fix_gate_chi2)
     }

@@ -147,6 +147,11 @@ fn save(img: &image::RgbImage, path: &Path) -> anyhow::Result<()> {
 /// filter lowers each cell's σ by averaging neighbours but not the noise's power per unit
 /// area, which is what registration at the tile's coarser smoothing sees. 0 when no cell is
 /// valid. From the radar's own coherence, not the truth, so a real mission has it too.
+/// A lower bound on that power: the multilook windows overlap (size 8, step 4), so even
+/// before the DEM filter neighbouring cells' noise correlates (the filter's factor, 0.55–0.57,
+/// is above white noise's 0.33), and correlated noise carries more power per unit area than
+/// its per-cell σ² × cell area. The map share it feeds (`nav_core::filter::map_noise_share`,
+/// 0.98 on the default radar's maps) would only move towards 1 with the true power.
 pub fn white_noise_m(p: &InsarProduct) -> f64 {
     let (sum, n) = p
         .dem

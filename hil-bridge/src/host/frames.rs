@@ -31,8 +31,9 @@ pub const TERRAIN_SIDE: usize = 600;
 /// Tile ground sample distance, metres.
 pub const TILE_PIXEL_M: f64 = 20.0;
 /// Format version of the recorded set (bumped on any change of `frames.bin`'s layout or of the
-/// frames the generator makes, so that a set on disk is regenerated; 4: the noisy frames).
-pub const FRAMES_FORMAT_VERSION: u32 = 4;
+/// frames the generator makes, or of the tile format its `tile.bin` and `atlas.bin` hold, so
+/// that a set on disk is regenerated; 4: the noisy frames; 5: tile format 5).
+pub const FRAMES_FORMAT_VERSION: u32 = 5;
 /// Terrain seed.
 pub const TERRAIN_SEED: u64 = 8;
 /// Core side of the HIL atlas's tiles, tile pixels (the 300 px map in 2 × 2 tiles).
