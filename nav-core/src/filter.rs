@@ -53,7 +53,9 @@ const KEY: usize = 18;
 /// Index of the fix-error drift block (east, north) in the error state.
 const DRIFT: usize = 20;
 /// Correlation length of the fix-error drift in log footprint side: the drift's correlation
-/// between two footprints whose sides differ by the factor `e^Δℓ` is `e^(−|Δℓ|/L)`.
+/// between two footprints whose sides differ by the factor `e^Δℓ` is `e^(−|Δℓ|/L)`. Chosen,
+/// not fitted: the measured change stayed smooth up to Δℓ = 0.32, the largest span measured
+/// (docs/registration.md, session 33), so L is above that; 0.5 was the only value flown.
 const DRIFT_LENGTH_LN: f64 = 0.5;
 /// Largest footprint correlation used: a fix always carries some fresh error (the frame's own
 /// range noise is new each time), so its covariance never vanishes.
@@ -321,6 +323,26 @@ fn split(cf: &Matrix3<f64>, shared: [f64; 2]) -> Matrix3<f64> {
         };
         cf.get((i, j)).copied().unwrap_or(0.0) * s
     })
+}
+
+/// One Gauss–Markov step of a modelled prior variance `model` towards `target` with
+/// correlation `r` (`model ← r²·model + (1 − r²)·target`), except that a target above the
+/// model (or a non-finite model) resets it to the target: the new error is the carried one plus
+/// an independent part. Returns the variance to add beyond the plain step's `(1 − r²)·target`:
+/// `r²·(target − model)` on such a reset, else 0.
+fn top_up(model: &mut f64, target: f64, r: f64) -> f64 {
+    if target > *model || !model.is_finite() {
+        let extra = if model.is_finite() {
+            r * r * (target - *model)
+        } else {
+            0.0
+        };
+        *model = target;
+        extra
+    } else {
+        *model = r * r * *model + (1.0 - r * r) * target;
+        0.0
+    }
 }
 
 fn finite3(a: &[f64; 3]) -> bool {
@@ -605,27 +627,9 @@ impl NavFilter {
         // the modelled variance: the new error is the carried one plus an independent part.
         let mut extra = [0.0f64; 3];
         for ((g, t), e) in self.fix_ground_var.iter_mut().zip(target).zip(&mut extra) {
-            if t > *g || !g.is_finite() {
-                *e = if g.is_finite() {
-                    rho * rho * (t - *g)
-                } else {
-                    0.0
-                };
-                *g = t;
-            } else {
-                *g = rho * rho * *g + (1.0 - rho * rho) * t;
-            }
+            *e = top_up(g, t, rho);
         }
-        for i in 0..STATE_DIM {
-            for k in 0..3 {
-                if let Some(v) = self.cov.get_mut((FIX + k, i)) {
-                    *v *= rho;
-                }
-                if let Some(v) = self.cov.get_mut((i, FIX + k)) {
-                    *v *= rho;
-                }
-            }
-        }
+        self.scale_block(FIX, 3, rho);
         let fresh = split(cf, shared) * (1.0 - rho * rho);
         let mut block = self.cov.fixed_view_mut::<3, 3>(FIX, FIX);
         block += fresh;
@@ -636,6 +640,21 @@ impl NavFilter {
         }
         self.fix_err *= rho;
         self.symmetrise();
+    }
+
+    /// Rows and columns `start..start + n` of the covariance scaled by `f` (a Gauss–Markov
+    /// state keeping the fraction `f` of itself; its diagonal by `f²`).
+    fn scale_block(&mut self, start: usize, n: usize, f: f64) {
+        for i in 0..STATE_DIM {
+            for k in start..start + n {
+                if let Some(v) = self.cov.get_mut((k, i)) {
+                    *v *= f;
+                }
+                if let Some(v) = self.cov.get_mut((i, k)) {
+                    *v *= f;
+                }
+            }
+        }
     }
 
     /// The drift part of [`Self::move_fix_error`]: the fix error moves by `Δℓ·δd` (`Δℓ` the
@@ -668,16 +687,7 @@ impl NavFilter {
             self.fix_err.y += dl * self.fix_drift[1];
         }
         let rd = rho * libm::exp(-dl.abs() / DRIFT_LENGTH_LN);
-        for i in 0..STATE_DIM {
-            for a in 0..2 {
-                if let Some(v) = self.cov.get_mut((DRIFT + a, i)) {
-                    *v *= rd;
-                }
-                if let Some(v) = self.cov.get_mut((i, DRIFT + a)) {
-                    *v *= rd;
-                }
-            }
-        }
+        self.scale_block(DRIFT, 2, rd);
         for d in &mut self.fix_drift {
             *d *= rd;
         }
@@ -696,18 +706,7 @@ impl NavFilter {
                 continue;
             }
             // As for the fix error: a drift model smaller than the new size is topped up.
-            let add = if var > *m || !m.is_finite() {
-                let extra = if m.is_finite() {
-                    rd * rd * (var - *m)
-                } else {
-                    0.0
-                };
-                *m = var;
-                (1.0 - rd * rd) * var + extra
-            } else {
-                *m = rd * rd * *m + (1.0 - rd * rd) * var;
-                (1.0 - rd * rd) * var
-            };
+            let add = (1.0 - rd * rd) * var + top_up(m, var, rd);
             if let Some(v) = self.cov.get_mut((DRIFT + a, DRIFT + a)) {
                 *v += add;
             }

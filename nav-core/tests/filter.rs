@@ -385,12 +385,7 @@ fn fixes_of_shared_ground_do_not_make_the_filter_overconfident() {
     let (told, blind) = ((told.0 / n, told.1 / n), (blind.0 / n, blind.1 / n));
     // Modelled: consistent (95 % band holds ~95 %, mean NEES near 2). Ignored: the same fixes
     // make the filter overconfident, which is what this model exists to prevent.
-    assert!(told.0 >= 0.85, "with the footprint: {:.3} in band", told.0);
-    assert!(
-        (0.7..=3.5).contains(&told.1),
-        "with the footprint: mean NEES {:.2}",
-        told.1
-    );
+    assert_consistent("with the footprint", told, 0.85);
     assert!(
         blind.1 > 2.0 * told.1,
         "independent fixes were not overconfident: {blind:?}"
@@ -404,16 +399,9 @@ fn fixes_whose_ground_error_grows_keep_the_filter_consistent() {
     // the track, no velocimeter. The shared error must grow
     // with them; carried at its old size it would make the filter trust the fixes' common
     // error far below its size.
-    let (mut band, mut mean) = (0.0, 0.0);
     let seeds = [21u64, 22, 23, 24, 25, 26, 27, 28, 29, 30, 31, 32];
-    for &seed in &seeds {
-        let (b, m) = fly_over_correlated_ground(Flight::steady(true, 5.0, 4.0, false, seed));
-        println!("seed {seed}: {:.1} % in band, mean NEES {m:.2}", b * 100.0);
-        band += b / seeds.len() as f64;
-        mean += m / seeds.len() as f64;
-    }
-    assert!(band >= 0.90, "{:.3} in band", band);
-    assert!((0.7..=3.5).contains(&mean), "mean NEES {mean:.2}");
+    let grown = pooled(Flight::steady(true, 5.0, 4.0, false, 0), &seeds);
+    assert_consistent("fivefold growth", grown, 0.90);
 }
 
 /// Mean over `seeds` of (fraction in band, mean NEES) for `fl` flown at each seed.
@@ -425,6 +413,17 @@ fn pooled(fl: Flight, seeds: &[u64]) -> (f64, f64) {
         mean += m / seeds.len() as f64;
     }
     (band, mean)
+}
+
+/// Pooled (fraction in band, mean NEES) of a consistent filter: at least `min_band` in the 95 %
+/// band and a mean NEES near the 2 of χ²(2) (0.7–3.5, for flights whose values correlate).
+fn assert_consistent(label: &str, (band, mean): (f64, f64), min_band: f64) {
+    println!(
+        "{label}: {:.1} % in band, mean NEES {mean:.2}",
+        band * 100.0
+    );
+    assert!(band >= min_band, "{label}: {band:.3} in band");
+    assert!((0.7..=3.5).contains(&mean), "{label}: mean NEES {mean:.2}");
 }
 
 #[test]
@@ -452,12 +451,7 @@ fn fixes_over_a_noisy_map_are_shared_as_the_map_says() {
         untold.0 * 100.0,
         untold.1
     );
-    assert!(told.0 >= 0.90, "told: {:.3} in band", told.0);
-    assert!(
-        (0.7..=3.5).contains(&told.1),
-        "told: mean NEES {:.2}",
-        told.1
-    );
+    assert_consistent("map share told", told, 0.90);
     assert!(
         untold.1 > 1.5 * told.1,
         "the default half was not overconfident: {untold:?} vs {told:?}"
@@ -488,12 +482,7 @@ fn a_shrinking_footprint_error_is_not_read_as_velocity() {
         without.0 * 100.0,
         without.1
     );
-    assert!(with.0 >= 0.92, "with the drift: {:.3} in band", with.0);
-    assert!(
-        (0.7..=3.5).contains(&with.1),
-        "with the drift: mean NEES {:.2}",
-        with.1
-    );
+    assert_consistent("with the drift", with, 0.92);
     assert!(
         with.0 >= without.0 + 0.02 && without.1 > with.1,
         "the drift state did not help: {without:?} vs {with:?}"
