@@ -90,14 +90,18 @@ impl HazardConfig {
     /// with `ground-sim hazard-calibrate --pixel-m 0.25` (lola/shoemaker/plains zones, seeds
     /// 101–106: 0.26 % of its safe sites truly unsafe, 23 % of the safe ground offered) and in
     /// descents (at 0.20 m, 0.76 % and 28 %, two of 540 touchdowns were unsafe; the one
-    /// examined sat on a site the confirmation had passed). The aim moves at most 10 m: the
-    /// flyer is about 95 m up and the site was chosen already.
+    /// examined sat on a site the confirmation had passed). The aim moves at most 16 m (the
+    /// flyer is about 95 m up, 20 s above touchdown): at 0.17 m this map passes few roomy
+    /// sites, and with a 10 m reach half the runs over InSAR maps found none with 2 m of
+    /// clearance and took one with about 1 m, which a 0.3 m landing dispersion could leave
+    /// (session 34: 3 unsafe touchdowns in 116 open-ground runs at 10 m, none at 16 m; the runs
+    /// still aimed at a narrow site fell from about half to a quarter).
     pub fn confirmation() -> Self {
         Self {
             max_relief_m: 0.17,
             clearance_m: 2.0,
             preferred_clearance_m: 3.0,
-            max_reach_m: 10.0,
+            max_reach_m: 16.0,
             ..Self::default()
         }
     }
@@ -107,10 +111,11 @@ impl HazardConfig {
 /// sensor): sixteen pixels across the 4 m footprint.
 pub const CONFIRM_MAX_PIXEL_M: f32 = 0.25;
 
-/// Half side of the confirmation map's window around the aim, m: the confirmation's 10 m reach,
-/// its 3 m preferred clearance and one site to spare. It bounds the map's work: 29 × 29 sites
-/// at 0.25 m pixels against 64 × 64 for a whole 0.4 m frame (docs/bounds.md).
-pub const CONFIRM_HALF_WINDOW_M: f32 = 14.0;
+/// Half side of the confirmation map's window around the aim, m: the confirmation's 16 m reach,
+/// its 3 m preferred clearance and one site to spare (the window's edge counts as a hazard).
+/// It bounds the map's work: 41 × 41 sites at 0.25 m pixels against 64 × 64 for a whole
+/// 0.4 m frame (docs/bounds.md); a 200-pixel frame at 0.25 m spans ±25 m.
+pub const CONFIRM_HALF_WINDOW_M: f32 = 20.0;
 
 /// Why no hazard map was made.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -193,6 +193,11 @@ pub struct DescentSummary {
     pub confirm_maps: usize,
     /// Runs whose confirmation moved the aim.
     pub runs_moved_by_confirmation: usize,
+    /// Runs whose final aim had less than the choice's clearance
+    /// ([`nav_core::hazard::HazardConfig::clearance_m`]) on the flyer's last map of it: no roomier
+    /// site was in reach, so the lander's dispersion may carry it onto a hazard the map saw.
+    #[serde(default)]
+    pub runs_on_narrow_site: usize,
     /// Runs whose ground within the site choice's reach (30 m) of the target is at least half
     /// safe by the truth: the landing zones the 99 % goal speaks of.
     pub open_zone_runs: usize,
@@ -547,6 +552,10 @@ pub fn report(
         runs_retargeted: per_run.iter().filter(|r| r.site_changes > 0).count(),
         confirm_maps: per_run.iter().map(|r| r.confirm_maps).sum(),
         runs_moved_by_confirmation: per_run.iter().filter(|r| r.confirm_moves > 0).count(),
+        runs_on_narrow_site: per_run
+            .iter()
+            .filter(|r| r.site_clearance_m < f64::from(spec.config.hazard.clearance_m))
+            .count(),
         open_zone_runs: open.len(),
         open_zone_safe_frac: open
             .iter()
@@ -625,6 +634,12 @@ pub fn report(
             println!(
                 "confirmation {} maps around the chosen aim on finer frames; {} runs moved by them",
                 summary.confirm_maps, summary.runs_moved_by_confirmation
+            );
+        }
+        if summary.runs_on_narrow_site > 0 {
+            println!(
+                "             {} runs aimed at a site with less than {:.0} m clearance on their own map (none roomier in reach)",
+                summary.runs_on_narrow_site, summary.config.hazard.clearance_m
             );
         }
     }

@@ -55,6 +55,11 @@ pub struct HazardPicture {
 }
 
 /// Heights written by serde_json (NaN as `null`) read back.
+/// Serde default of a figure missing from an older report: not measured.
+fn nan() -> f64 {
+    f64::NAN
+}
+
 fn f32s_or_nan<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Vec<f32>, D::Error> {
     let v: Vec<Option<f32>> = Deserialize::deserialize(d)?;
     Ok(v.into_iter().map(|x| x.unwrap_or(f32::NAN)).collect())
@@ -375,6 +380,10 @@ pub struct RunResult {
     /// Confirmation maps that moved the aim.
     #[serde(default)]
     pub confirm_moves: usize,
+    /// Clearance of the spot finally aimed at on the flyer's own map that last judged it
+    /// (kept or chosen), m; NaN if no map judged it.
+    #[serde(default = "nan", deserialize_with = "f64_or_nan")]
+    pub site_clearance_m: f64,
     /// The last hazard map, then the last confirmation map (pictured run only).
     #[serde(skip)]
     pub hazard_pictures: Vec<HazardPicture>,
@@ -556,6 +565,7 @@ pub fn fly(
         hazard_no_site: 0,
         confirm_maps: 0,
         confirm_moves: 0,
+        site_clearance_m: f64::NAN,
         hazard_pictures: Vec::new(),
         touchdown_safe: None,
         touchdown_slope_deg: f64::NAN,
@@ -900,7 +910,8 @@ pub fn fly(
                             out.hazard_maps += 1;
                         }
                         match decision {
-                            AimDecision::Keep { .. } => {
+                            AimDecision::Keep { clearance_m } => {
+                                out.site_clearance_m = f64::from(clearance_m);
                                 confirmed |= confirm_due;
                                 site_chosen = true;
                             }
@@ -909,6 +920,7 @@ pub fn fly(
                                     confirmed = true;
                                     out.confirm_moves += 1;
                                 }
+                                out.site_clearance_m = f64::from(site.clearance_m);
                                 let d = frame_px_to_en(site.frame_px, h_est, pixel_m, w, hh);
                                 aim = [pe[0] + d[0], pe[1] + d[1]];
                                 // Where that spot truly is: the frame is centred on the truth.
