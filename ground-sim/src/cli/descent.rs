@@ -198,6 +198,9 @@ pub struct DescentSummary {
     /// site was in reach, so the lander's dispersion may carry it onto a hazard the map saw.
     #[serde(default)]
     pub runs_on_narrow_site: usize,
+    /// Runs whose aim no hazard map judged (no map made, or no avoidance).
+    #[serde(default)]
+    pub runs_aim_unjudged: usize,
     /// Runs whose ground within the site choice's reach (30 m) of the target is at least half
     /// safe by the truth: the landing zones the 99 % goal speaks of.
     pub open_zone_runs: usize,
@@ -556,6 +559,10 @@ pub fn report(
             .iter()
             .filter(|r| r.site_clearance_m < f64::from(spec.config.hazard.clearance_m))
             .count(),
+        runs_aim_unjudged: per_run
+            .iter()
+            .filter(|r| !r.site_clearance_m.is_finite())
+            .count(),
         open_zone_runs: open.len(),
         open_zone_safe_frac: open
             .iter()
@@ -636,10 +643,12 @@ pub fn report(
                 summary.confirm_maps, summary.runs_moved_by_confirmation
             );
         }
-        if summary.runs_on_narrow_site > 0 {
+        if summary.runs_on_narrow_site + summary.runs_aim_unjudged > 0 {
             println!(
-                "             {} runs aimed at a site with less than {:.0} m clearance on their own map (none roomier in reach)",
-                summary.runs_on_narrow_site, summary.config.hazard.clearance_m
+                "             {} runs aimed at a site with less than {:.0} m clearance on their own map (none roomier in reach); {} aims no map judged",
+                summary.runs_on_narrow_site,
+                summary.config.hazard.clearance_m,
+                summary.runs_aim_unjudged
             );
         }
     }

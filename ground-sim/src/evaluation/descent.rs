@@ -54,12 +54,12 @@ pub struct HazardPicture {
     pub confirmation: bool,
 }
 
-/// Heights written by serde_json (NaN as `null`) read back.
 /// Serde default of a figure missing from an older report: not measured.
 fn nan() -> f64 {
     f64::NAN
 }
 
+/// Heights written by serde_json (NaN as `null`) read back.
 fn f32s_or_nan<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Vec<f32>, D::Error> {
     let v: Vec<Option<f32>> = Deserialize::deserialize(d)?;
     Ok(v.into_iter().map(|x| x.unwrap_or(f32::NAN)).collect())
@@ -381,7 +381,8 @@ pub struct RunResult {
     #[serde(default)]
     pub confirm_moves: usize,
     /// Clearance of the spot finally aimed at on the flyer's own map that last judged it
-    /// (kept or chosen), m; NaN if no map judged it.
+    /// (kept, chosen, or left in place because nothing better was in reach; 0 if that map
+    /// called it unsafe), m; NaN if no map judged it.
     #[serde(default = "nan", deserialize_with = "f64_or_nan")]
     pub site_clearance_m: f64,
     /// The last hazard map, then the last confirmation map (pictured run only).
@@ -930,6 +931,9 @@ pub fn fly(
                                 site_chosen = true;
                             }
                             AimDecision::NoSite => {
+                                // The aim stays: this map judged it last (0 if unsafe here).
+                                let (i, j) = hazards.nearest_site(aim_now);
+                                out.site_clearance_m = f64::from(hazards.clearance_m(i, j));
                                 out.hazard_no_site += 1;
                                 map_rest = true;
                             }

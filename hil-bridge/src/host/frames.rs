@@ -32,8 +32,9 @@ pub const TERRAIN_SIDE: usize = 600;
 pub const TILE_PIXEL_M: f64 = 20.0;
 /// Format version of the recorded set (bumped on any change of `frames.bin`'s layout or of the
 /// frames the generator makes, or of the tile format its `tile.bin` and `atlas.bin` hold, so
-/// that a set on disk is regenerated; 4: the noisy frames; 5: tile format 5).
-pub const FRAMES_FORMAT_VERSION: u32 = 5;
+/// that a set on disk is regenerated; 4: the noisy frames; 5: tile format 5; 6: the stress
+/// confirmation's aim at the frame centre).
+pub const FRAMES_FORMAT_VERSION: u32 = 6;
 /// Terrain seed.
 pub const TERRAIN_SEED: u64 = 8;
 /// Core side of the HIL atlas's tiles, tile pixels (the 300 px map in 2 × 2 tiles).
@@ -917,8 +918,13 @@ fn final_phase_frames(dem: &Dem, frames: &mut Vec<Frame>) -> Result<()> {
             | FrameKind::Confirm
             | FrameKind::StressConfirm => {
                 // The target 25 px right of and 15 px below the frame centre (frame axes), the
-                // aim still on it: the map keeps it or moves it.
-                let target = [side / 2.0 + 25.0, side / 2.0 + 15.0];
+                // aim still on it: the map keeps it or moves it. The stress confirmation's aim
+                // sits at the centre, so its window is whole (the most sites it can have).
+                let target = if matches!(kind, FrameKind::StressConfirm) {
+                    [side / 2.0; 2]
+                } else {
+                    [side / 2.0 + 25.0, side / 2.0 + 15.0]
+                };
                 if matches!(kind, FrameKind::StressHazard | FrameKind::StressConfirm) {
                     // Gentle swell a few centimetres high, every footprint read in full, and one
                     // 0.8 m boulder on the aim: the choice then scans the whole lattice.
