@@ -560,8 +560,7 @@ impl NavFilter {
         // The map's share was measured on position; the heading keeps the default.
         let s = self.cfg.fix_shared_fraction.clamp(0.0, 1.0);
         let shared = [s.max(z.map_share).clamp(0.0, 1.0), s];
-        let drift = self.cfg.fix_scale_drift;
-        self.move_fix_error([z.x_m, z.y_m], z.footprint_m, &cf, shared, drift);
+        self.move_fix_error([z.x_m, z.y_m], z.footprint_m, &cf, shared);
         let y = SVector::<f64, 3>::new(
             z.x_m - self.p.x - self.fix_err.x,
             z.y_m - self.p.y - self.fix_err.y,
@@ -605,7 +604,6 @@ impl NavFilter {
         footprint_m: f64,
         cf: &Matrix3<f64>,
         shared: [f64; 2],
-        drift: f64,
     ) {
         let rho = footprint_correlation(self.last_fix.0, self.last_fix.1, centre, footprint_m);
         // Change of log footprint side since the last fix (0 without one or on new ground).
@@ -621,7 +619,7 @@ impl NavFilter {
             let t = s * cf.get((k, k)).copied().unwrap_or(0.0).max(0.0);
             if t.is_finite() { t } else { 0.0 }
         });
-        self.move_drift(dl, rho, &target, drift);
+        self.move_drift(dl, rho, &target);
         self.last_fix = (centre, footprint_m.max(0.0));
         // Fresh error beyond the Gauss–Markov step's where the new fix's ground share exceeds
         // the modelled variance: the new error is the carried one plus an independent part.
@@ -660,10 +658,11 @@ impl NavFilter {
     /// The drift part of [`Self::move_fix_error`]: the fix error moves by `Δℓ·δd` (`Δℓ` the
     /// change of log footprint side), then the drift keeps `ρ·e^(−|Δℓ|/L)` of itself (ρ the
     /// footprints' overlap: new ground, new drift) and gains fresh error towards its modelled
-    /// variance `k²·g` (`k` = `drift`, `g` per axis the larger of the ground error's modelled
+    /// variance `k²·g` (`k` = [`FilterConfig::fix_scale_drift`], `g` per axis the larger of the ground error's modelled
     /// variance and the new fix's share `target`, or the share alone on new ground, `ρ` = 0).
     /// The variance the move adds to the fix error is on top of the top-up's (conservative).
-    fn move_drift(&mut self, dl: f64, rho: f64, target: &[f64; 3], k: f64) {
+    fn move_drift(&mut self, dl: f64, rho: f64, target: &[f64; 3]) {
+        let k = self.cfg.fix_scale_drift;
         if !(k.is_finite() && k > 0.0 && dl.is_finite()) {
             return;
         }
@@ -791,8 +790,7 @@ impl NavFilter {
         let cf = Matrix3::new(c[0][0], cxy, 0.0, cxy, c[1][1], 0.0, 0.0, 0.0, 0.0);
         let centre = [self.p.x, self.p.y];
         let s = self.cfg.fix_shared_fraction.clamp(0.0, 1.0);
-        let drift = self.cfg.fix_scale_drift;
-        self.move_fix_error(centre, z.footprint_m, &cf, [s, s], drift);
+        self.move_fix_error(centre, z.footprint_m, &cf, [s, s]);
         let y = SVector::<f64, 2>::new(
             z.east_m - (self.p.x - key[0]) - self.fix_err.x,
             z.north_m - (self.p.y - key[1]) - self.fix_err.y,
