@@ -250,10 +250,65 @@ struct Pass {
     slag: f64,
     /// Σ e·e' over vertically neighbouring valid samples (the first [`LAG_ROW`] of a row).
     svlag: f64,
+    /// Σ e·e''' over valid samples three apart along a row, with the two between them valid
+    /// (final pass only: the correlation's shape, [`Pass::sigma2`]).
+    slag3: f64,
+    /// Σ e·e''' over valid samples three rows apart, with the two between them valid (final
+    /// pass only).
+    svlag3: f64,
     /// Rows 0–5, columns 0–3 of the sensitivity matrix `A = Σ w·s_F·s_Rᵀ` (row-major 6 × 4),
     /// filled only in the final pass ([`pass`]'s `sandwich`); its columns 4–5 equal the
     /// normal matrix's.
     a: [f64; 24],
+}
+
+/// Most lags [`lag_factor`] sums where the decay is faster than first order.
+const LAG_TERMS: u16 = 64;
+
+/// Terms of [`lag_factor`]'s sum below this are left out (with the rest of the sum: the terms
+/// fall monotonically).
+const LAG_TERM_FLOOR: f32 = 1e-6;
+
+/// Variance factor of a sum of samples along one axis whose correlation at lag k is
+/// ρ₁^(kᵖ): 1 + 2·Σₖ ρ₁^(kᵖ). The decay's shape p comes from the measured lag-3
+/// correlation, ρ₃ = ρ₁^(3ᵖ), held between 1 and 2:
+///
+/// - p = 1, first order ρ₁ᵏ: the slowest decay assumed, (1 + ρ₁)/(1 − ρ₁) in closed form,
+///   the model used before the shape was measured;
+/// - p = 2, Gaussian ρ₁^(k²): residuals of two Gaussian-smoothed slope images whose
+///   difference is itself smooth.
+///
+/// A first-order model on residuals that decay like the blur overstated their variance about
+/// twofold per axis over InSAR maps (docs/registration.md, "What an InSAR fix's σ covers").
+/// Lag 3 rather than 2, because a slower tail behind a fast start (the InSAR plains) shows
+/// there first. The sum runs in `f32` (hardware on the Cortex-M4F, where `f64` transcendentals
+/// are software), at most [`LAG_TERMS`] terms.
+fn lag_factor(rho1: f64, rho3: f64) -> f64 {
+    if !(rho1 > 0.0 && rho1 < 1.0) {
+        return 1.0;
+    }
+    let cube = rho1 * rho1 * rho1;
+    if !rho3.is_finite() || rho3 >= cube {
+        return (1.0 + rho1) / (1.0 - rho1);
+    }
+    let ln_rho = libm::logf(rho1 as f32);
+    let p = if rho3 <= cube * cube * cube {
+        2.0
+    } else {
+        // ln ρ₃ / ln ρ₁ = 3ᵖ lies in (3, 9) here.
+        libm::logf(libm::logf(rho3 as f32) / ln_rho) / libm::logf(3.0)
+    };
+    let mut f = 1.0f32;
+    let mut k = 1u16;
+    while k <= LAG_TERMS {
+        let term = libm::expf(ln_rho * libm::powf(k as f32, p));
+        if !(term >= LAG_TERM_FLOOR) {
+            break;
+        }
+        f += 2.0 * term;
+        k += 1;
+    }
+    f as f64
 }
 
 /// Samples per row whose residuals are kept for the vertical lag correlation (a row of the
@@ -304,10 +359,18 @@ impl Pass {
     /// Residual variance per sample, degrees², inflated for the residuals' correlation along
     /// both axes of the sample grid (the effective number of independent samples shrinks by
     /// both axes' factors).
+    ///
+    /// The steps' passes assume the slowest decay, first order ρᵏ (factor (1 + ρ)/(1 − ρ)); the
+    /// final pass also measures the correlation two samples apart and sums the decay it shows
+    /// ([`lag_factor`]).
     fn sigma2(&self) -> f64 {
         let rho = self.lag_correlation() as f64;
         let rho_v = self.vertical_lag_correlation() as f64;
-        let inflate = (1.0 + rho) / (1.0 - rho) * (1.0 + rho_v) / (1.0 - rho_v);
+        let inflate = if self.see > 0.0 && (self.slag3 != 0.0 || self.svlag3 != 0.0) {
+            lag_factor(rho, self.slag3 / self.see) * lag_factor(rho_v, self.svlag3 / self.see)
+        } else {
+            (1.0 + rho) / (1.0 - rho) * (1.0 + rho_v) / (1.0 - rho_v)
+        };
         self.see / (self.n as f64 - 6.0).max(1.0) * inflate
     }
     fn rms(&self) -> f32 {
@@ -412,8 +475,14 @@ fn pass(
     let mut v = lo + half;
     // Residuals of the previous sample row (NaN = no valid sample there).
     let mut above = [f32::NAN; LAG_ROW];
+    // Residuals two and three sample rows up (final pass only; NaN = none, or a row between
+    // invalid).
+    let mut above2 = [f32::NAN; LAG_ROW];
+    let mut above3 = [f32::NAN; LAG_ROW];
     while v + lo < h {
         let mut svlag = 0.0f32;
+        let (mut slag3, mut svlag3) = (0.0f32, 0.0f32);
+        let (mut prev2, mut prev3) = (None::<f32>, None::<f32>);
         let mut col = 0usize;
         let mut hr = [0.0f32; 21];
         let mut br = [0.0f32; 6];
@@ -439,20 +508,37 @@ fn pass(
             })();
             u += st;
             let slot = above.get_mut(col);
+            let slot2 = above2.get_mut(col);
+            let slot3 = above3.get_mut(col);
             col += 1;
             let Some((f, fx, fy, x, y, r, gx, gy)) = sample else {
-                prev = None;
-                if let Some(a) = slot {
+                (prev, prev2, prev3) = (None, None, None);
+                for a in [slot, slot2, slot3].into_iter().flatten() {
                     *a = f32::NAN;
                 }
                 continue;
             };
             let e = r - (g * f + o);
+            if sandwich {
+                if let (Some(p3), Some(_), Some(_)) = (prev3, prev2, prev) {
+                    slag3 += p3 * e;
+                }
+                prev3 = prev2;
+                prev2 = prev;
+            }
             if let Some(p) = prev {
                 slag += p * e;
             }
             prev = Some(e);
             if let Some(a) = slot {
+                if sandwich && let (Some(a2), Some(a3)) = (slot2, slot3) {
+                    // Three rows up only through valid samples between.
+                    if a3.is_finite() && a2.is_finite() && a.is_finite() {
+                        svlag3 += *a3 * e;
+                    }
+                    *a3 = *a2;
+                    *a2 = *a;
+                }
                 if a.is_finite() {
                     svlag += *a * e;
                 }
@@ -516,6 +602,8 @@ fn pass(
         out.see += see as f64;
         out.slag += slag as f64;
         out.svlag += svlag as f64;
+        out.slag3 += slag3 as f64;
+        out.svlag3 += svlag3 as f64;
         v += st;
     }
     out
@@ -986,6 +1074,30 @@ mod tests {
     /// convergence test stops short of the fixed point and leaves the estimate nearer its
     /// start; the test converges tightly to score the fixed point, whose covariance the
     /// sandwich describes.
+    #[test]
+    fn the_lag_factor_spans_first_order_to_gaussian_decay() {
+        for rho in [0.1, 0.5, 0.9] {
+            // Lag 3 at ρ³ (or above): first order, (1 + ρ)/(1 − ρ).
+            let first = (1.0 + rho) / (1.0 - rho);
+            assert_eq!(lag_factor(rho, rho.powi(3)), first);
+            assert_eq!(lag_factor(rho, rho), lag_factor(rho, rho.powi(3)));
+            assert_eq!(lag_factor(rho, f64::NAN), lag_factor(rho, rho.powi(3)));
+            // Lag 3 at ρ⁹ (or below): Gaussian, 1 + 2·Σ ρ^(k²).
+            let gauss: f64 = 1.0 + 2.0 * (1..=64).map(|k| rho.powi(k * k)).sum::<f64>();
+            assert!((lag_factor(rho, rho.powi(9)) - gauss).abs() < 1e-5 * gauss);
+            assert_eq!(lag_factor(rho, -0.3), lag_factor(rho, rho.powi(9)));
+            // In between, in between: a faster decay never inflates more.
+            let mid = lag_factor(rho, rho.powi(5));
+            assert!(gauss < mid && mid < lag_factor(rho, rho.powi(3)));
+        }
+        // Uncorrelated (or anticorrelated, clamped to 0 before) residuals: no inflation.
+        assert_eq!(lag_factor(0.0, 0.0), 1.0);
+        assert_eq!(lag_factor(f64::NAN, 0.5), 1.0);
+        // At the 0.9 clamp the Gaussian factor is about a quarter of the first-order one per axis.
+        let r = lag_factor(0.9, 0.9f64.powi(9)) / lag_factor(0.9, 0.9f64.powi(3));
+        assert!(r > 0.25 && r < 0.3, "{r}");
+    }
+
     #[test]
     fn the_covariance_covers_a_noisy_frame() {
         let bytes = tile_bytes(Some(&reference()));

@@ -249,6 +249,17 @@ pub struct EvalSummary {
     /// Mean NEES of the fixes' centres (2 dof: 2 when consistent, less when padded, more when
     /// optimistic).
     pub nees_mean: f64,
+    /// The correct fixes' common offset: their mean signed error east and north, metres (fix −
+    /// truth). Frames over the same map share what the map gets wrong; an offset the fixes'
+    /// residuals cannot see shows here and not in any single fix (docs/registration.md,
+    /// "What an InSAR fix's σ covers").
+    pub err_mean_m: [f64; 2],
+    /// The correct fixes' scatter about that offset: standard deviation east and north, metres.
+    pub err_sd_m: [f64; 2],
+    /// Share of the correct fixes' mean squared error that the common offset accounts for,
+    /// 0–1 (0: the errors scatter about the truth; 1: every fix is off alike). NaN without
+    /// fixes.
+    pub common_error_share: f64,
     /// Mean onboard time per frame on this host, ms.
     pub time_ms_mean: f64,
     /// No-fix reasons and their counts.
@@ -294,6 +305,24 @@ pub fn percentile(v: &mut [f64], p: f64) -> f64 {
     v[k.min(v.len() - 1)]
 }
 
+/// The common offset of signed errors `(east, north)` (metres), their scatter about it and the
+/// share of the mean squared error the offset accounts for: `([mean], [sd], share)`; NaN
+/// when empty.
+pub fn error_split(errors: &[(f64, f64)]) -> ([f64; 2], [f64; 2], f64) {
+    if errors.is_empty() {
+        return ([f64::NAN; 2], [f64::NAN; 2], f64::NAN);
+    }
+    let n = errors.len() as f64;
+    let me = errors.iter().map(|e| e.0).sum::<f64>() / n;
+    let mn = errors.iter().map(|e| e.1).sum::<f64>() / n;
+    let ve = errors.iter().map(|e| (e.0 - me).powi(2)).sum::<f64>() / n;
+    let vn = errors.iter().map(|e| (e.1 - mn).powi(2)).sum::<f64>() / n;
+    let common = me * me + mn * mn;
+    let total = common + ve + vn;
+    let share = if total > 0.0 { common / total } else { 0.0 };
+    ([me, mn], [ve.sqrt(), vn.sqrt()], share)
+}
+
 /// Summarise a campaign's rows.
 pub fn summarize(rows: &[TrnScore], spec: &CampaignSpec) -> EvalSummary {
     let n = rows.len().max(1) as f64;
@@ -310,6 +339,11 @@ pub fn summarize(rows: &[TrnScore], spec: &CampaignSpec) -> EvalSummary {
         .collect();
     let reg: Vec<f64> = fixes.iter().filter_map(|r| r.pos_err_mean_px).collect();
     let nees: Vec<f64> = fixes.iter().filter_map(|r| r.nees).collect();
+    let signed: Vec<(f64, f64)> = good
+        .iter()
+        .filter_map(|r| Some((r.err_east_m?, r.err_north_m?)))
+        .collect();
+    let (err_mean_m, err_sd_m, common_error_share) = error_split(&signed);
     let mut reasons = BTreeMap::new();
     for r in rows.iter().filter(|r| !r.fix) {
         *reasons
@@ -357,6 +391,9 @@ pub fn summarize(rows: &[TrnScore], spec: &CampaignSpec) -> EvalSummary {
         within_3sigma_frac: nees.iter().filter(|&&d| d <= 9.0).count() as f64
             / fixes.len().max(1) as f64,
         nees_mean: mean(&nees),
+        err_mean_m,
+        err_sd_m,
+        common_error_share,
         time_ms_mean: rows.iter().map(|r| r.time_ms).sum::<f64>() / n,
         no_fix_reasons: reasons,
         refined_frac: fixes.iter().filter(|r| r.refined).count() as f64 / fixes.len().max(1) as f64,
@@ -430,6 +467,17 @@ pub fn print_summary(s: &EvalSummary) {
         s.nees_mean,
         s.time_ms_mean
     );
+    if s.common_error_share.is_finite() {
+        println!(
+            "error split common offset east {:+.2} m, north {:+.2} m ({:.0} % of the mean squared \
+             error); scatter about it σ {:.2} / {:.2} m",
+            s.err_mean_m[0],
+            s.err_mean_m[1],
+            s.common_error_share * 100.0,
+            s.err_sd_m[0],
+            s.err_sd_m[1]
+        );
+    }
     if !s.no_fix_reasons.is_empty() {
         println!("no fix      {:?}", s.no_fix_reasons);
     }
@@ -513,4 +561,30 @@ pub fn write_csv_trials(path: &Path, trials: &[usize], rows: &[TrnScore]) -> any
     }
     csv.flush()?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::error_split;
+
+    #[test]
+    fn the_error_split_separates_a_shared_offset_from_scatter() {
+        // Every fix off by the same (3, −4) m: all of the error is the common offset.
+        let (m, sd, share) = error_split(&[(3.0, -4.0); 5]);
+        assert_eq!(m, [3.0, -4.0]);
+        assert_eq!(sd, [0.0, 0.0]);
+        assert_eq!(share, 1.0);
+        // Errors symmetric about the truth: no offset, scatter 1 m per axis.
+        let (m, sd, share) = error_split(&[(1.0, 0.0), (-1.0, 0.0), (0.0, 1.0), (0.0, -1.0)]);
+        assert_eq!(m, [0.0, 0.0]);
+        assert!((sd[0] - 0.5f64.sqrt()).abs() < 1e-12 && (sd[1] - 0.5f64.sqrt()).abs() < 1e-12);
+        assert_eq!(share, 0.0);
+        // Offset 1 m east and scatter ±1 m east: offset 1 of a mean squared error of 2.
+        let (m, sd, share) = error_split(&[(0.0, 0.0), (2.0, 0.0)]);
+        assert_eq!(m, [1.0, 0.0]);
+        assert_eq!(sd, [1.0, 0.0]);
+        assert_eq!(share, 0.5);
+        let (m, _, share) = error_split(&[]);
+        assert!(m[0].is_nan() && share.is_nan());
+    }
 }
