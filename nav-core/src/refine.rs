@@ -361,14 +361,24 @@ impl Pass {
     /// both axes' factors).
     ///
     /// The steps' passes assume the slowest decay, first order ρᵏ (factor (1 + ρ)/(1 − ρ)); the
-    /// final pass also measures the correlation two samples apart and sums the decay it shows
-    /// ([`lag_factor`]).
+    /// final pass also measures the correlation three samples apart and sums the decay it
+    /// shows ([`lag_factor`]). An axis without a single such triple keeps first order.
     fn sigma2(&self) -> f64 {
         let rho = self.lag_correlation() as f64;
         let rho_v = self.vertical_lag_correlation() as f64;
-        let inflate = if self.see > 0.0 && (self.slag3 != 0.0 || self.svlag3 != 0.0) {
-            lag_factor(rho, self.slag3 / self.see) * lag_factor(rho_v, self.svlag3 / self.see)
+        // A lag-3 sum of exactly 0 on one axis means no triple was seen along it: NaN sends
+        // `lag_factor` to first order, the conservative end.
+        let lag3 = |s: f64| {
+            if s != 0.0 && self.see > 0.0 {
+                s / self.see
+            } else {
+                f64::NAN
+            }
+        };
+        let inflate = if self.slag3 != 0.0 || self.svlag3 != 0.0 {
+            lag_factor(rho, lag3(self.slag3)) * lag_factor(rho_v, lag3(self.svlag3))
         } else {
+            // The steps' passes: the same expression, so their fits keep every bit.
             (1.0 + rho) / (1.0 - rho) * (1.0 + rho_v) / (1.0 - rho_v)
         };
         self.see / (self.n as f64 - 6.0).max(1.0) * inflate
