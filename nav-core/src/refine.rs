@@ -254,8 +254,12 @@ struct Pass {
     /// (final pass only: the correlation's shape, [`Pass::sigma2`]).
     slag3: f64,
     /// Σ e·e''' over valid samples three rows apart, with the two between them valid (final
-    /// pass only).
+    /// pass only; the first [`LAG_ROW`] of a row).
     svlag3: f64,
+    /// Pairs summed (final pass only): lag 1 and lag 3 along rows, lag 1 and lag 3 down
+    /// columns. A run of L valid samples holds L − 1 pairs at lag 1 but L − 3 at lag 3, so the
+    /// decay's shape compares per-pair means, not sums over the same Σe².
+    pairs: [u32; 4],
     /// Rows 0–5, columns 0–3 of the sensitivity matrix `A = Σ w·s_F·s_Rᵀ` (row-major 6 × 4),
     /// filled only in the final pass ([`pass`]'s `sandwich`); its columns 4–5 equal the
     /// normal matrix's.
@@ -281,8 +285,9 @@ const LAG_TERM_FLOOR: f32 = 1e-6;
 /// A first-order model on residuals that decay like the blur overstated their variance about
 /// twofold per axis over InSAR maps (docs/registration.md, "What an InSAR fix's σ covers").
 /// Lag 3 rather than 2, because a slower tail behind a fast start (the InSAR plains) shows
-/// there first. The sum runs in `f32` (hardware on the Cortex-M4F, where `f64` transcendentals
-/// are software), at most [`LAG_TERMS`] terms.
+/// there first. The sum runs in `f32`: the Cortex-M4F does `f32` arithmetic in hardware and
+/// `f64` in software, and `f64` transcendentals cost up to 7 M instructions a frame here (HIL,
+/// session 35). At most [`LAG_TERMS`] terms.
 fn lag_factor(rho1: f64, rho3: f64) -> f64 {
     if !(rho1 > 0.0 && rho1 < 1.0) {
         return 1.0;
@@ -362,21 +367,24 @@ impl Pass {
     ///
     /// The steps' passes assume the slowest decay, first order ρᵏ (factor (1 + ρ)/(1 − ρ)); the
     /// final pass also measures the correlation three samples apart and sums the decay it
-    /// shows ([`lag_factor`]). An axis without a single such triple keeps first order.
+    /// shows ([`lag_factor`]). An axis without a lag-3 pair, or without a positive lag-1 sum,
+    /// keeps first order.
     fn sigma2(&self) -> f64 {
         let rho = self.lag_correlation() as f64;
         let rho_v = self.vertical_lag_correlation() as f64;
-        // A lag-3 sum of exactly 0 on one axis means no triple was seen along it: NaN sends
-        // `lag_factor` to first order, the conservative end.
-        let lag3 = |s: f64| {
-            if s != 0.0 && self.see > 0.0 {
-                s / self.see
+        let [n1, n3, n1v, n3v] = self.pairs;
+        // ρ₃ as ρ₁ times the ratio of the per-pair means at lags 3 and 1; NaN (first order,
+        // the conservative end) where that ratio is undefined.
+        let lag3 = |rho1: f64, s1: f64, n1: u32, s3: f64, n3: u32| {
+            if n1 > 0 && n3 > 0 && s1 > 0.0 {
+                rho1 * (s3 / n3 as f64) / (s1 / n1 as f64)
             } else {
                 f64::NAN
             }
         };
-        let inflate = if self.slag3 != 0.0 || self.svlag3 != 0.0 {
-            lag_factor(rho, lag3(self.slag3)) * lag_factor(rho_v, lag3(self.svlag3))
+        let inflate = if n3 > 0 || n3v > 0 {
+            lag_factor(rho, lag3(rho, self.slag, n1, self.slag3, n3))
+                * lag_factor(rho_v, lag3(rho_v, self.svlag, n1v, self.svlag3, n3v))
         } else {
             // The steps' passes: the same expression, so their fits keep every bit.
             (1.0 + rho) / (1.0 - rho) * (1.0 + rho_v) / (1.0 - rho_v)
@@ -492,6 +500,7 @@ fn pass(
     while v + lo < h {
         let mut svlag = 0.0f32;
         let (mut slag3, mut svlag3) = (0.0f32, 0.0f32);
+        let mut pairs = [0u32; 4];
         let (mut prev2, mut prev3) = (None::<f32>, None::<f32>);
         let mut col = 0usize;
         let mut hr = [0.0f32; 21];
@@ -532,6 +541,10 @@ fn pass(
             if sandwich {
                 if let (Some(p3), Some(_), Some(_)) = (prev3, prev2, prev) {
                     slag3 += p3 * e;
+                    pairs[1] += 1;
+                }
+                if prev.is_some() {
+                    pairs[0] += 1;
                 }
                 prev3 = prev2;
                 prev2 = prev;
@@ -545,6 +558,10 @@ fn pass(
                     // Three rows up only through valid samples between.
                     if a3.is_finite() && a2.is_finite() && a.is_finite() {
                         svlag3 += *a3 * e;
+                        pairs[3] += 1;
+                    }
+                    if a.is_finite() {
+                        pairs[2] += 1;
                     }
                     *a3 = *a2;
                     *a2 = *a;
@@ -614,6 +631,9 @@ fn pass(
         out.svlag += svlag as f64;
         out.slag3 += slag3 as f64;
         out.svlag3 += svlag3 as f64;
+        for (t, c) in out.pairs.iter_mut().zip(pairs) {
+            *t += c;
+        }
         v += st;
     }
     out
@@ -1075,39 +1095,150 @@ mod tests {
         assert_eq!(off.h, p.h);
     }
 
-    /// Over many noisy frames the refined centre scatters as its covariance says. The frame
-    /// carries white slope noise of 1° per pixel against gradients of about 1° per pixel, so
-    /// its central differences are noisy: σ²·H⁻¹ alone (before the sandwich) scored a mean
-    /// NEES of 8.4 here, the sandwich 1.58 (a little conservative: the residuals' lag
-    /// correlation, clamped at 0 from below, inflates σ² by ~1.2 on white noise). The noisy H
-    /// also shortens every Gauss–Newton step (by H_true/H, 0.4 here), so the default 0.03 px
-    /// convergence test stops short of the fixed point and leaves the estimate nearer its
-    /// start; the test converges tightly to score the fixed point, whose covariance the
-    /// sandwich describes.
+    /// The shape's two ends and the middle, with the thresholds built as `lag_factor` builds
+    /// them (ρ·ρ·ρ, then its cube), since `powi` may round otherwise.
     #[test]
     fn the_lag_factor_spans_first_order_to_gaussian_decay() {
         for rho in [0.1, 0.5, 0.9] {
-            // Lag 3 at ρ³ (or above): first order, (1 + ρ)/(1 − ρ).
+            let cube = rho * rho * rho;
+            let ninth = cube * cube * cube;
+            // Lag 3 at ρ³ (or above): first order, (1 + ρ)/(1 − ρ), in closed form.
             let first = (1.0 + rho) / (1.0 - rho);
-            assert_eq!(lag_factor(rho, rho.powi(3)), first);
-            assert_eq!(lag_factor(rho, rho), lag_factor(rho, rho.powi(3)));
-            assert_eq!(lag_factor(rho, f64::NAN), lag_factor(rho, rho.powi(3)));
+            assert_eq!(lag_factor(rho, cube), first);
+            assert_eq!(lag_factor(rho, rho), first);
+            assert_eq!(lag_factor(rho, f64::NAN), first);
             // Lag 3 at ρ⁹ (or below): Gaussian, 1 + 2·Σ ρ^(k²).
             let gauss: f64 = 1.0 + 2.0 * (1..=64).map(|k| rho.powi(k * k)).sum::<f64>();
-            assert!((lag_factor(rho, rho.powi(9)) - gauss).abs() < 1e-5 * gauss);
-            assert_eq!(lag_factor(rho, -0.3), lag_factor(rho, rho.powi(9)));
-            // In between, in between: a faster decay never inflates more.
-            let mid = lag_factor(rho, rho.powi(5));
-            assert!(gauss < mid && mid < lag_factor(rho, rho.powi(3)));
+            assert!((lag_factor(rho, ninth) - gauss).abs() < 1e-5 * gauss);
+            assert_eq!(lag_factor(rho, -0.3), lag_factor(rho, ninth));
+            // Just above the Gaussian end the computed shape takes over, continuously.
+            let near = lag_factor(rho, ninth * 1.01);
+            assert!(near >= lag_factor(rho, ninth) && (near - gauss).abs() < 1e-2 * gauss);
+            // In between: p = ln 5 / ln 3 for ρ₃ = ρ⁵, against an f64 sum of that shape.
+            let p = libm::log(5.0) / libm::log(3.0);
+            let want: f64 = 1.0
+                + 2.0
+                    * (1..=64)
+                        .map(|k| libm::pow(rho, libm::pow(k as f64, p)))
+                        .sum::<f64>();
+            let mid = lag_factor(rho, cube * rho * rho);
+            assert!((mid - want).abs() < 1e-4 * want, "{mid} {want}");
+            assert!(gauss < mid && mid < first);
         }
         // Uncorrelated (or anticorrelated, clamped to 0 before) residuals: no inflation.
         assert_eq!(lag_factor(0.0, 0.0), 1.0);
         assert_eq!(lag_factor(f64::NAN, 0.5), 1.0);
-        // At the 0.9 clamp the Gaussian factor is about a quarter of the first-order one per axis.
-        let r = lag_factor(0.9, 0.9f64.powi(9)) / lag_factor(0.9, 0.9f64.powi(3));
+        // At the 0.9 clamp the Gaussian factor is about a quarter of the first-order one.
+        let c = 0.9 * 0.9 * 0.9;
+        let r = lag_factor(0.9, c * c * c) / lag_factor(0.9, c);
         assert!(r > 0.25 && r < 0.3, "{r}");
     }
 
+    /// The final pass's lag sums against a brute-force count over the same residuals: a frame
+    /// that sees the reference through a pure shift plus a known ripple, one sample masked.
+    /// Lag 3 pairs only through valid samples between, both axes; the steps' passes sum none.
+    #[test]
+    fn the_final_pass_sums_lag_three_through_valid_samples_only() {
+        let bytes = tile_bytes(Some(&reference()));
+        let tile = Tile::parse(&bytes).unwrap();
+        let raster = tile.slope_raster().unwrap();
+        let ripple = |u: usize, v: usize| 2.0 * libm::sin(1.7 * u as f64 + 0.9 * v as f64);
+        let mut px: Vec<SlopePx> = (0..60 * 60)
+            .map(|i| {
+                let (u, v) = (i % 60, i / 60);
+                slope_from_deg((field(u as f64 + 10.0, v as f64 + 10.0) + ripple(u, v)) as f32)
+            })
+            .collect();
+        // (12, 12) is a sample of the stride-2 grid; no other sample reads it.
+        px[12 * 60 + 12] = SLOPE_NODATA;
+        let img = SlopeImage::new_checked(&px, 60, 60, 16.0).unwrap();
+        let warp = Warp {
+            m: [[1.0, 0.0], [0.0, 1.0]],
+            t: [39.5, 39.5],
+        };
+        let model = PassModel {
+            gain: 1.0,
+            offset: 0.0,
+            huber: f32::INFINITY,
+            sandwich: true,
+        };
+        let p = pass(&img, raster, &warp, (2, 1), (29.5, 29.5), &model);
+        // The residual at each sample of the grid (u, v = 2, 4, …, 58), None where masked.
+        let grid: Vec<Vec<Option<f64>>> = (2..59)
+            .step_by(2)
+            .map(|v| {
+                (2..59)
+                    .step_by(2)
+                    .map(|u| {
+                        (u != 12 || v != 12).then(|| {
+                            let r = bilinear(raster, u as f32 + 10.0, v as f32 + 10.0).unwrap();
+                            (r - deg(img.get(u, v)).unwrap()) as f64
+                        })
+                    })
+                    .collect()
+            })
+            .collect();
+        let (mut s3, mut sv3, mut pairs) = (0.0, 0.0, [0u32; 4]);
+        for (i, row) in grid.iter().enumerate() {
+            for (j, e) in row.iter().enumerate() {
+                let Some(e) = e else { continue };
+                let at = |i: usize, j: usize| grid[i][j];
+                if j >= 1 && at(i, j - 1).is_some() {
+                    pairs[0] += 1;
+                }
+                if j >= 3 && (1..=3).all(|d| at(i, j - d).is_some()) {
+                    s3 += e * at(i, j - 3).unwrap();
+                    pairs[1] += 1;
+                }
+                if i >= 1 && at(i - 1, j).is_some() {
+                    pairs[2] += 1;
+                }
+                if i >= 3 && (1..=3).all(|d| at(i - d, j).is_some()) {
+                    sv3 += e * at(i - 3, j).unwrap();
+                    pairs[3] += 1;
+                }
+            }
+        }
+        assert_eq!(p.pairs, pairs);
+        // 29 samples a row and column (28 lag-1 and 26 lag-3 pairs each), one masked: its row
+        // and its column each lose 2 lag-1 and 4 lag-3 pairs.
+        assert_eq!(pairs, [29 * 28 - 2, 29 * 26 - 4, 29 * 28 - 2, 29 * 26 - 4]);
+        assert!(
+            (p.slag3 - s3).abs() <= 1e-4 * s3.abs().max(1.0),
+            "{} {s3}",
+            p.slag3
+        );
+        assert!(
+            (p.svlag3 - sv3).abs() <= 1e-4 * sv3.abs().max(1.0),
+            "{} {sv3}",
+            p.svlag3
+        );
+        assert!(s3 != 0.0 && sv3 != 0.0);
+        let off = pass(
+            &img,
+            raster,
+            &warp,
+            (2, 1),
+            (29.5, 29.5),
+            &PassModel {
+                sandwich: false,
+                ..model
+            },
+        );
+        assert_eq!((off.slag3, off.svlag3, off.pairs), (0.0, 0.0, [0; 4]));
+        assert_eq!(off.slag, p.slag);
+    }
+
+    /// Over many noisy frames the refined centre scatters as its covariance says. The frame
+    /// carries white slope noise of 1° per pixel against gradients of about 1° per pixel, so
+    /// its central differences are noisy: σ²·H⁻¹ alone (before the sandwich) scored a mean
+    /// NEES of 8.4 here, the sandwich 1.58 (session 20, with the first-order lag factor: a
+    /// little conservative, the residuals' lag correlation, clamped at 0 from below, inflated
+    /// σ² by ~1.2 on white noise). The noisy H
+    /// also shortens every Gauss–Newton step (by H_true/H, 0.4 here), so the default 0.03 px
+    /// convergence test stops short of the fixed point and leaves the estimate nearer its
+    /// start; the test converges tightly to score the fixed point, whose covariance the
+    /// sandwich describes.
     #[test]
     fn the_covariance_covers_a_noisy_frame() {
         let bytes = tile_bytes(Some(&reference()));

@@ -254,7 +254,8 @@ pub struct EvalSummary {
     /// residuals cannot see shows here and not in any single fix (docs/registration.md,
     /// "What an InSAR fix's σ covers").
     pub err_mean_m: [f64; 2],
-    /// The correct fixes' scatter about that offset: standard deviation east and north, metres.
+    /// The correct fixes' scatter about that offset: standard deviation east and north, metres
+    /// (dividing by the number of fixes, so offset² + scatter² is their mean squared error).
     pub err_sd_m: [f64; 2],
     /// Share of the correct fixes' mean squared error that the common offset accounts for,
     /// 0–1 (0: the errors scatter about the truth; 1: every fix is off alike). NaN without
@@ -574,7 +575,7 @@ mod tests {
         assert_eq!(m, [3.0, -4.0]);
         assert_eq!(sd, [0.0, 0.0]);
         assert_eq!(share, 1.0);
-        // Errors symmetric about the truth: no offset, scatter 1 m per axis.
+        // Errors symmetric about the truth: no offset, scatter √½ m per axis (1 m RMS radially).
         let (m, sd, share) = error_split(&[(1.0, 0.0), (-1.0, 0.0), (0.0, 1.0), (0.0, -1.0)]);
         assert_eq!(m, [0.0, 0.0]);
         assert!((sd[0] - 0.5f64.sqrt()).abs() < 1e-12 && (sd[1] - 0.5f64.sqrt()).abs() < 1e-12);
