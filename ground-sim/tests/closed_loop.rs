@@ -160,6 +160,7 @@ fn tile_trn_eval_and_descent_on_a_generated_scene() {
         "runs",
         "landing_err_p50_m",
         "landing_err_p95_m",
+        "nav_err_at_landing_p95_m",
         "nav_err_rms_m",
         "fixes",
         "rejected_fixes",

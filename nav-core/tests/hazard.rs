@@ -87,11 +87,52 @@ fn a_rock_at_the_target_moves_the_site_off_it() {
 #[test]
 fn missing_data_is_unsafe_and_bad_settings_are_refused() {
     let mut z = frame(|_, _| 0.0);
+    // One lost cell inside the frame reads as its neighbours: every site stays safe ...
     z[60 * SIDE + 60] = f32::NAN;
     let dem = DemPatch::new_checked(&z, SIDE, SIDE, PX).unwrap();
     let mut map = Box::new(HazardMap::new());
     let s = map.build(&dem, &HazardConfig::default()).unwrap();
-    assert!(s.no_data > 0 && s.no_data < s.sites);
+    assert_eq!((s.safe, s.no_data), (s.sites, 0), "{s:?}");
+    // ... two side by side are a hole, and so is one on the frame's edge.
+    z[60 * SIDE + 61] = f32::NAN;
+    z[29 * SIDE] = f32::NAN;
+    let dem = DemPatch::new_checked(&z, SIDE, SIDE, PX).unwrap();
+    let s = map.build(&dem, &HazardConfig::default()).unwrap();
+    assert!(s.no_data > 0 && s.no_data < s.sites, "{s:?}");
+    let (cols, rows) = map.size();
+    let site_of = |col: f32, row: f32| map.nearest_site([col, row]);
+    let (i, j) = site_of(60.0, 60.0);
+    assert!(!map.is_safe(i, j));
+    let (i, j) = site_of(5.0, 29.0);
+    assert!(!map.is_safe(i, j), "{:?} {:?}", (i, j), map.site_px(i, j));
+    assert!(map.is_safe(cols / 2, rows - 1));
+    // A no-data sentinel marks ground outside the data, not a lost return: a hole.
+    let mut z = frame(|_, _| 1.0);
+    z[40 * SIDE + 40] = -9999.0;
+    let dem = DemPatch::new_checked(&z, SIDE, SIDE, PX)
+        .unwrap()
+        .with_nodata(-9999.0);
+    let s = map.build(&dem, &HazardConfig::default()).unwrap();
+    assert!(s.no_data > 0 && s.no_data < s.sites, "{s:?}");
+    // Lost returns scattered more densely than one in 32 cells of a footprint are a hole too,
+    // each of them fillable: every other cell of every other row around (60, 60).
+    let mut z = frame(|_, _| 0.0);
+    for r in (50..70).step_by(2) {
+        for c in (50..70).step_by(2) {
+            z[r * SIDE + c] = f32::NAN;
+        }
+    }
+    let dem = DemPatch::new_checked(&z, SIDE, SIDE, PX).unwrap();
+    let s = map.build(&dem, &HazardConfig::default()).unwrap();
+    let (i, j) = map.nearest_site([60.0, 60.0]);
+    assert!(!map.is_safe(i, j) && s.no_data > 0, "{s:?}");
+    // Two in one 0.4 m footprint (78 cells) are within the bound: (60, 60) and (62, 60).
+    let mut z = frame(|_, _| 0.0);
+    z[60 * SIDE + 60] = f32::NAN;
+    z[60 * SIDE + 62] = f32::NAN;
+    let dem = DemPatch::new_checked(&z, SIDE, SIDE, PX).unwrap();
+    let s = map.build(&dem, &HazardConfig::default()).unwrap();
+    assert_eq!((s.safe, s.no_data), (s.sites, 0), "{s:?}");
     let bad = HazardConfig {
         max_relief_m: f32::NAN,
         ..HazardConfig::default()
@@ -114,6 +155,30 @@ fn missing_data_is_unsafe_and_bad_settings_are_refused() {
     );
     // A failed build leaves no map to choose from.
     assert!(map.choose([4.0, 4.0], &HazardConfig::default()).is_none());
+}
+
+/// A lost cell on the rock's top hides none of it: the neighbours the fill reads are on the
+/// rock too, and the cells around them still stand out of the plane.
+#[test]
+fn a_rock_with_its_top_lost_is_still_seen() {
+    let (c, mut z) = rock_frame();
+    let k = (c / PX) as usize;
+    let (mut a, mut b) = (Box::new(HazardMap::new()), Box::new(HazardMap::new()));
+    let cfg = HazardConfig::default();
+    let dem = DemPatch::new_checked(&z, SIDE, SIDE, PX).unwrap();
+    let whole = a.build(&dem, &cfg).unwrap();
+    z[k * SIDE + k] = f32::NAN;
+    let dem = DemPatch::new_checked(&z, SIDE, SIDE, PX).unwrap();
+    let lost = b.build(&dem, &cfg).unwrap();
+    assert_eq!(lost.no_data, 0);
+    assert_eq!(lost.safe, whole.safe, "{whole:?} {lost:?}");
+    let (cols, rows) = a.size();
+    assert!(!b.is_safe(cols / 2, rows / 2));
+    for j in 0..rows {
+        for i in 0..cols {
+            assert_eq!(a.is_safe(i, j), b.is_safe(i, j), "site ({i}, {j})");
+        }
+    }
 }
 
 #[test]

@@ -146,13 +146,17 @@ pub struct DescentSummary {
     pub atlas_retries: usize,
     /// Over an atlas: changes of the tile a frame's report came from, all runs.
     pub atlas_tile_switches: usize,
-    /// Median landing error, m: distance from the touchdown to the spot aimed at (the target, or
-    /// the safe site chosen near it), truth.
+    /// Median landing error, m: distance from the touchdown to the spot aimed at (the spot the
+    /// last hazard map judged, chosen or kept; the target without a map), truth.
     pub landing_err_p50_m: f64,
     /// 95th percentile landing error, m.
     pub landing_err_p95_m: f64,
     /// Largest landing error, m.
     pub landing_err_max_m: f64,
+    /// 95th percentile of the horizontal navigation error at touchdown, m: how far the flyer
+    /// believed itself from where it was, whatever it aimed at.
+    #[serde(default)]
+    pub nav_err_at_landing_p95_m: f64,
     /// RMS horizontal navigation error over all runs and frame times, m.
     pub nav_err_rms_m: f64,
     /// Fixes accepted by the filter (all runs).
@@ -505,6 +509,13 @@ pub fn report(
         landing_err_p50_m: percentile(&mut land.clone(), 0.5),
         landing_err_p95_m: percentile(&mut land.clone(), 0.95),
         landing_err_max_m: land.iter().copied().fold(0.0, f64::max),
+        nav_err_at_landing_p95_m: percentile(
+            &mut per_run
+                .iter()
+                .map(|r| r.nav_err_at_landing_m)
+                .collect::<Vec<_>>(),
+            0.95,
+        ),
         nav_err_rms_m: (sq / samples.max(1) as f64).sqrt(),
         fixes: per_run.iter().map(|r| r.fixes).sum(),
         rejected_fixes: per_run.iter().map(|r| r.rejected_fixes).sum(),
@@ -604,8 +615,11 @@ pub fn report(
         summary.runs, summary.seed, summary.hop_mean_m, summary.flight_mean_s
     );
     println!(
-        "landing      p50 {:.2} m  p95 {:.2} m  max {:.2} m",
-        summary.landing_err_p50_m, summary.landing_err_p95_m, summary.landing_err_max_m
+        "landing      p50 {:.2} m  p95 {:.2} m  max {:.2} m (to the spot aimed at); navigation error at touchdown p95 {:.2} m",
+        summary.landing_err_p50_m,
+        summary.landing_err_p95_m,
+        summary.landing_err_max_m,
+        summary.nav_err_at_landing_p95_m
     );
     println!(
         "navigation   RMS {:.2} m; fixes {} accepted, {} rejected by the gate, {} frames without a fix",

@@ -291,8 +291,9 @@ pub struct RunResult {
     /// Over an atlas: times the tile a TRN frame's report came from changed.
     #[serde(default)]
     pub atlas_tile_switches: usize,
-    /// Horizontal distance from the landing point to the spot aimed at (the target, or the safe
-    /// site chosen near it), m.
+    /// Horizontal distance from the landing point to the spot aimed at, m, truth: the spot the
+    /// last hazard map judged (the safe site it chose, or the ground under the aim it kept, as
+    /// its frame saw it); the target where no map judged one.
     #[serde(deserialize_with = "f64_or_nan")]
     pub landing_err_m: f64,
     /// Horizontal navigation error at touchdown, m.
@@ -361,8 +362,9 @@ pub struct RunResult {
     /// ([`HazardConfig::max_reach_m`], truth): the landing zone the lander can choose from.
     #[serde(default, deserialize_with = "f64_or_nan")]
     pub reach_safe_frac: f64,
-    /// Distance from the target to the spot finally aimed at (the chosen safe site; 0 without
-    /// a choice), m, truth.
+    /// Distance from the target to the spot finally aimed at (the site the last map chose or
+    /// kept, which includes the navigation error of that map's moment; 0 without a map), m,
+    /// truth.
     #[serde(default, deserialize_with = "f64_or_nan")]
     pub site_from_target_m: f64,
     /// Hazard maps made.
@@ -913,6 +915,12 @@ pub fn fly(
                         match decision {
                             AimDecision::Keep { clearance_m } => {
                                 out.site_clearance_m = f64::from(clearance_m);
+                                // The spot this map judged is the one under the aim in its
+                                // frame, as for a move: the aim, off by the navigation error
+                                // of the moment. Scoring a kept aim against the target instead
+                                // counted that error for kept aims alone (session 36).
+                                let dt = frame_px_to_en(aim_now, -yaw, pixel_m, w, hh);
+                                aim_truth = [p[0] + dt[0], p[1] + dt[1]];
                                 confirmed |= confirm_due;
                                 site_chosen = true;
                             }

@@ -926,14 +926,21 @@ fn final_phase_frames(dem: &Dem, frames: &mut Vec<Frame>) -> Result<()> {
                     [side / 2.0 + 25.0, side / 2.0 + 15.0]
                 };
                 if matches!(kind, FrameKind::StressHazard | FrameKind::StressConfirm) {
-                    // Gentle swell a few centimetres high, every footprint read in full, and one
-                    // 0.8 m boulder on the aim: the choice then scans the whole lattice.
+                    // Gentle swell a few centimetres high and one 0.8 m boulder on the aim: the
+                    // choice then scans the whole lattice. A lost return every 7 cells each way
+                    // (isolated, so each is filled) puts 1–2 in every 0.4 m footprint and about 4
+                    // in every 0.25 m one, within `hazard::LOST_CELLS_PER`: every site reads
+                    // its footprint and fills its lost cells, the map's costliest path.
                     let tex = stress(FrameKind::Textured, 93);
                     heights = tex.iter().map(|&t| t * 0.001).collect();
                     for (i, h) in heights.iter_mut().enumerate() {
-                        let (x, y) = ((i % FRAME_SIDE) as f32, (i / FRAME_SIDE) as f32);
+                        let (col, row) = (i % FRAME_SIDE, i / FRAME_SIDE);
+                        let (x, y) = (col as f32, row as f32);
                         if (x - target[0]).hypot(y - target[1]) < 2.5 {
                             *h += 0.8;
+                        }
+                        if col % 7 == 3 && row % 7 == 3 {
+                            *h = f32::NAN;
                         }
                     }
                 }
