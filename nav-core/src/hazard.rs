@@ -469,6 +469,8 @@ impl<const N: usize> HazardMap<N> {
             }
             Some(acc * 0.25)
         };
+        // (index, dx, dy) of a footprint's lost cells; each site overwrites what it reads.
+        let mut lost = [(0usize, 0.0f32, 0.0f32); MAX_LOST_CELLS];
         for j in 0..rows {
             for i in 0..cols {
                 let (cx, cy) = (half + (i0 + i) * step, half + (j0 + j) * step);
@@ -480,8 +482,7 @@ impl<const N: usize> HazardMap<N> {
                 };
                 let (mut bad, z0) = (z0.is_none(), z0.unwrap_or(0.0));
                 let (mut s, mut sx, mut sy) = (0.0f32, 0.0f32, 0.0f32);
-                // Lost cells of this footprint: (index, dx, dy); read after the sums.
-                let mut lost = [(0usize, 0.0f32, 0.0f32); MAX_LOST_CELLS];
+                // Lost cells of this footprint in `lost[..n_lost]`: read after the sums.
                 let mut n_lost = 0usize;
                 'spans: for &(dy, dx0, off, len) in spans {
                     let Some(cells) = cells_of(at, off, len) else {

@@ -126,7 +126,7 @@ fn missing_data_is_unsafe_and_bad_settings_are_refused() {
     let s = map.build(&dem, &HazardConfig::default()).unwrap();
     let (i, j) = map.nearest_site([60.0, 60.0]);
     assert!(!map.is_safe(i, j) && s.no_data > 0, "{s:?}");
-    // Two in one 0.4 m footprint (78 cells) are within the bound: (60, 60) and (62, 60).
+    // Two in one 0.4 m footprint (81 cells) are within the bound: (60, 60) and (62, 60).
     let mut z = frame(|_, _| 0.0);
     z[60 * SIDE + 60] = f32::NAN;
     z[60 * SIDE + 62] = f32::NAN;

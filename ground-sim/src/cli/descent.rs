@@ -155,7 +155,6 @@ pub struct DescentSummary {
     pub landing_err_max_m: f64,
     /// 95th percentile of the horizontal navigation error at touchdown, m: how far the flyer
     /// believed itself from where it was, whatever it aimed at.
-    #[serde(default)]
     pub nav_err_at_landing_p95_m: f64,
     /// RMS horizontal navigation error over all runs and frame times, m.
     pub nav_err_rms_m: f64,

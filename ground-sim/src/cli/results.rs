@@ -608,11 +608,11 @@ pub fn run(a: &Args, dispatch: &dyn Fn(&[String]) -> anyhow::Result<()>) -> anyh
     )?;
     writeln!(
         md,
-        "| map | aiding | hazard avoidance | runs | landing error p50 / p95 / max (m) | safe touchdowns | … where ≥ 50 % of the ground within 30 m of the target is safe (runs) | ground within 10 m of the targets safe | site from target p50 / p95 (m) | nav error RMS (m) | fixes / offsets accepted | offset NEES mean | NEES in 95 % band (all / final) | mean NEES |"
+        "| map | aiding | hazard avoidance | runs | landing error p50 / p95 / max (m) | safe touchdowns | … where ≥ 50 % of the ground within 30 m of the target is safe (runs) | ground within 10 m of the targets safe | site from target p50 / p95 (m) | nav error RMS (m) | nav error at touchdown p95 (m) | fixes / offsets accepted | offset NEES mean | NEES in 95 % band (all / final) | mean NEES |"
     )?;
     writeln!(
         md,
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
     )?;
     let mut first = true;
     for (preset, map_label) in [
@@ -686,7 +686,7 @@ pub fn run(a: &Args, dispatch: &dyn Fn(&[String]) -> anyhow::Result<()>) -> anyh
                 };
                 writeln!(
                     md,
-                    "| {map_label} | {label} | {} | {} | {} / {} / {} | {} | {} ({}) | {} | {} | {} | {} / {} | {} | {} / {} | {} |",
+                    "| {map_label} | {label} | {} | {} | {} / {} / {} | {} | {} ({}) | {} | {} | {} | {} | {} / {} | {} | {} / {} | {} |",
                     if hazard { "yes" } else { "no" },
                     d["runs"],
                     f(&d, "landing_err_p50_m", 2),
@@ -719,6 +719,7 @@ pub fn run(a: &Args, dispatch: &dyn Fn(&[String]) -> anyhow::Result<()>) -> anyh
                         "–".into()
                     },
                     f(&d, "nav_err_rms_m", 2),
+                    f(&d, "nav_err_at_landing_p95_m", 2),
                     d["fixes"],
                     d["odometry_fixes"],
                     f(&d, "offset_nees_mean", 2),

@@ -292,8 +292,9 @@ pub struct RunResult {
     #[serde(default)]
     pub atlas_tile_switches: usize,
     /// Horizontal distance from the landing point to the spot aimed at, m, truth: the spot the
-    /// last hazard map judged (the safe site it chose, or the ground under the aim it kept, as
-    /// its frame saw it); the target where no map judged one.
+    /// last map that decided judged (the safe site it chose, or the ground under the aim it
+    /// kept, as its frame saw it; a map that found no site leaves the spot before it); the
+    /// target where no map decided.
     #[serde(deserialize_with = "f64_or_nan")]
     pub landing_err_m: f64,
     /// Horizontal navigation error at touchdown, m.

@@ -927,10 +927,12 @@ fn final_phase_frames(dem: &Dem, frames: &mut Vec<Frame>) -> Result<()> {
                 };
                 if matches!(kind, FrameKind::StressHazard | FrameKind::StressConfirm) {
                     // Gentle swell a few centimetres high and one 0.8 m boulder on the aim: the
-                    // choice then scans the whole lattice. A lost return every 7 cells each way
-                    // (isolated, so each is filled) puts 1–2 in every 0.4 m footprint and about 4
-                    // in every 0.25 m one, within `hazard::LOST_CELLS_PER`: every site reads
-                    // its footprint and fills its lost cells, the map's costliest path.
+                    // choice then scans the whole lattice. A lost return every 8 cells each way
+                    // (isolated, so each is filled) puts 0–2 in each 0.4 m footprint (81 cells,
+                    // 2 allowed) and 2–5 in each 0.25 m one (197 cells, 6 allowed): every site
+                    // stays safe, reads both passes and fills its lost cells, the map's
+                    // costliest path (every 7 cells, 3 fell in some 0.4 m footprints, which
+                    // then skipped their relief pass).
                     let tex = stress(FrameKind::Textured, 93);
                     heights = tex.iter().map(|&t| t * 0.001).collect();
                     for (i, h) in heights.iter_mut().enumerate() {
@@ -939,7 +941,7 @@ fn final_phase_frames(dem: &Dem, frames: &mut Vec<Frame>) -> Result<()> {
                         if (x - target[0]).hypot(y - target[1]) < 2.5 {
                             *h += 0.8;
                         }
-                        if col % 7 == 3 && row % 7 == 3 {
+                        if col % 8 == 3 && row % 8 == 3 {
                             *h = f32::NAN;
                         }
                     }
