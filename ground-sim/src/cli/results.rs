@@ -680,53 +680,7 @@ pub fn run(a: &Args, dispatch: &dyn Fn(&[String]) -> anyhow::Result<()>) -> anyh
                     }
                 }
                 let d = read(Path::new(&json))?;
-                let pct = |k: &str| {
-                    d[k].as_f64()
-                        .map_or("–".into(), |x| format!("{:.1} %", 100.0 * x))
-                };
-                writeln!(
-                    md,
-                    "| {map_label} | {label} | {} | {} | {} / {} / {} | {} | {} ({}) | {} | {} | {} | {} | {} / {} | {} | {} / {} | {} |",
-                    if hazard { "yes" } else { "no" },
-                    d["runs"],
-                    f(&d, "landing_err_p50_m", 2),
-                    f(&d, "landing_err_p95_m", 2),
-                    f(&d, "landing_err_max_m", 2),
-                    {
-                        // Where the unsafe touchdowns came from: a spot the map passed that the
-                        // truth calls unsafe, or a safe spot the lander missed.
-                        let (m, d) = (
-                            d["unsafe_on_unsafe_site"].as_u64().unwrap_or(0),
-                            d["unsafe_on_safe_site"].as_u64().unwrap_or(0),
-                        );
-                        let safe = pct("safe_landing_frac");
-                        if hazard && m + d > 0 {
-                            format!("{safe} ({m} on an unsafe spot, {d} off a safe one)")
-                        } else {
-                            safe
-                        }
-                    },
-                    pct("open_zone_safe_frac"),
-                    d["open_zone_runs"],
-                    pct("target_area_safe_frac"),
-                    if hazard {
-                        format!(
-                            "{} / {}",
-                            f(&d, "site_from_target_p50_m", 1),
-                            f(&d, "site_from_target_p95_m", 1)
-                        )
-                    } else {
-                        "–".into()
-                    },
-                    f(&d, "nav_err_rms_m", 2),
-                    f(&d, "nav_err_at_landing_p95_m", 2),
-                    d["fixes"],
-                    d["odometry_fixes"],
-                    f(&d, "offset_nees_mean", 2),
-                    pct("nees_in_band_frac"),
-                    pct("final_nees_in_band_frac"),
-                    f(&d, "nees_mean", 2)
-                )?;
+                writeln!(md, "{}", descent_row(map_label, label, hazard, &d))?;
             }
         }
     }
@@ -734,6 +688,7 @@ pub fn run(a: &Args, dispatch: &dyn Fn(&[String]) -> anyhow::Result<()>) -> anyh
         md,
         "\nBefore keyframe odometry (session 11) the last ~80 s below 2 km were unaided by TRN and, without a velocimeter, landing errors reached p95 9.7–21.4 m on these maps (30 runs each, same seeds).\n"
     )?;
+    insar_descent_section(&mut md, a, &go)?;
     writeln!(
         md,
         "Pictures of the runs (match pictures, trajectories, error envelopes) are in `{}`.\n",
@@ -744,6 +699,146 @@ pub fn run(a: &Args, dispatch: &dyn Fn(&[String]) -> anyhow::Result<()>) -> anyh
     std::fs::write(&a.out, md).with_context(|| format!("writing {}", a.out.display()))?;
     println!("\nwrote {}", a.out.display());
     Ok(())
+}
+
+/// Descents over InSAR maps of the same 16 km scenes (the default radar, hazard avoidance on):
+/// the product the flyer flies against, where the map's own error reaches the touchdown.
+fn insar_descent_section(
+    md: &mut String,
+    a: &Args,
+    go: &dyn Fn(&[&str]) -> anyhow::Result<()>,
+) -> anyhow::Result<()> {
+    let w = |s: &str| a.work.join(s).to_string_lossy().into_owned();
+    let seed = a.seed.to_string();
+    writeln!(md, "### The same descents over InSAR maps\n")?;
+    writeln!(
+        md,
+        "The same 16 km scenes, hops and seeds, the tile now made by `ground-sim insar` from each scene (the default radar: {}, radar seed {seed}), hazard avoidance on. Frames still come from the truth DEM. Here the map's own error (its height noise, and the blobs it puts a little off where the frames find them) moves every fix near the target alike, so the flyer carries it to the ground: the landing error to the spot aimed at stays small (the hazard map and the odometry are the flyer's own frames), while the navigation error at touchdown is the distance from the intended target's ground.\n",
+        ground_sim::evaluation::suite::radar_words(
+            &ground_sim::sar::RadarPreset::default().config(),
+            ground_sim::insar::pipeline::LookDirections::of_preset(Default::default()),
+            1,
+        )
+    )?;
+    writeln!(
+        md,
+        "| map | aiding | hazard avoidance | runs | landing error p50 / p95 / max (m) | safe touchdowns | … where ≥ 50 % of the ground within 30 m of the target is safe (runs) | ground within 10 m of the targets safe | site from target p50 / p95 (m) | nav error RMS (m) | nav error at touchdown p95 (m) | fixes / offsets accepted | offset NEES mean | NEES in 95 % band (all / final) | mean NEES |"
+    )?;
+    writeln!(
+        md,
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
+    )?;
+    let mut verdicts = Vec::new();
+    let mut maps = Vec::new();
+    for (preset, map_label) in [
+        ("lola", "LOLA-calibrated, InSAR"),
+        ("shoemaker", "Shoemaker-like floor, InSAR"),
+        ("plains", "smooth plains, InSAR"),
+    ] {
+        let dem = w(&format!("{preset}16.tif"));
+        let tile = w(&format!("{preset}16-insar"));
+        go(&[
+            "insar",
+            "--dem",
+            &dem,
+            "--out",
+            &tile,
+            "--seed",
+            &seed,
+            "--no-progress",
+        ])?;
+        let r = read(&Path::new(&tile).join("report.json"))?;
+        maps.push(format!(
+            "{map_label}: height RMSE {} m, slope RMSE {}°, {} tile features",
+            f(&r, "height_rmse_m", 2),
+            f(&r, "slope_rmse_deg", 2),
+            r["tile_features"]
+        ));
+        for (label, vel, bar_m) in [
+            ("TRN + odometry + velocimeter", true, 3.0),
+            ("TRN + odometry", false, 5.0),
+        ] {
+            let tag = format!("{preset}-insar-{}", if vel { "vel" } else { "novel" });
+            let json = w(&format!("descent-{tag}.json"));
+            let runs = a.runs.to_string();
+            let mut v = vec![
+                "descent", "--tile", &tile, "--dem", &dem, "--runs", &runs, "--seed", &seed,
+                "--json", &json,
+            ];
+            if !vel {
+                v.push("--no-velocimeter");
+            }
+            go(&v)?;
+            let d = read(Path::new(&json))?;
+            writeln!(md, "{}", descent_row(map_label, label, true, &d))?;
+            // The bars on the error from the intended target: 3 m with a velocimeter,
+            // 5 m without; said per row, met or not.
+            if let Some(e) = d["nav_err_at_landing_p95_m"].as_f64() {
+                verdicts.push(format!(
+                    "{map_label} ({label}): {e:.2} m against {bar_m} m, {}",
+                    if e <= bar_m { "met" } else { "**missed**" }
+                ));
+            }
+        }
+    }
+    writeln!(
+        md,
+        "\nNavigation error at touchdown (p95) against the bars on the error from the intended target (3 m with a velocimeter, 5 m without): {}.\n",
+        verdicts.join("; ")
+    )?;
+    writeln!(md, "The maps: {}.\n", maps.join("; "))?;
+    Ok(())
+}
+
+/// One row of a descent table from a `descent` summary JSON `d`: the map, the aiding, whether
+/// hazard avoidance flew, then landing, safety, navigation and NEES figures.
+fn descent_row(map_label: &str, label: &str, hazard: bool, d: &Value) -> String {
+    let pct = |k: &str| {
+        d[k].as_f64()
+            .map_or("–".into(), |x| format!("{:.1} %", 100.0 * x))
+    };
+    format!(
+        "| {map_label} | {label} | {} | {} | {} / {} / {} | {} | {} ({}) | {} | {} | {} | {} | {} / {} | {} | {} / {} | {} |",
+        if hazard { "yes" } else { "no" },
+        d["runs"],
+        f(&d, "landing_err_p50_m", 2),
+        f(&d, "landing_err_p95_m", 2),
+        f(&d, "landing_err_max_m", 2),
+        {
+            // Where the unsafe touchdowns came from: a spot the map passed that the
+            // truth calls unsafe, or a safe spot the lander missed.
+            let (m, d) = (
+                d["unsafe_on_unsafe_site"].as_u64().unwrap_or(0),
+                d["unsafe_on_safe_site"].as_u64().unwrap_or(0),
+            );
+            let safe = pct("safe_landing_frac");
+            if hazard && m + d > 0 {
+                format!("{safe} ({m} on an unsafe spot, {d} off a safe one)")
+            } else {
+                safe
+            }
+        },
+        pct("open_zone_safe_frac"),
+        d["open_zone_runs"],
+        pct("target_area_safe_frac"),
+        if hazard {
+            format!(
+                "{} / {}",
+                f(&d, "site_from_target_p50_m", 1),
+                f(&d, "site_from_target_p95_m", 1)
+            )
+        } else {
+            "–".into()
+        },
+        f(&d, "nav_err_rms_m", 2),
+        f(&d, "nav_err_at_landing_p95_m", 2),
+        d["fixes"],
+        d["odometry_fixes"],
+        f(&d, "offset_nees_mean", 2),
+        pct("nees_in_band_frac"),
+        pct("final_nees_in_band_frac"),
+        f(&d, "nees_mean", 2)
+    )
 }
 
 /// The paper's setting: reference tiles from the simulated InSAR of each preset
