@@ -801,9 +801,9 @@ fn descent_row(map_label: &str, label: &str, hazard: bool, d: &Value) -> String 
         "| {map_label} | {label} | {} | {} | {} / {} / {} | {} | {} ({}) | {} | {} | {} | {} | {} / {} | {} | {} / {} | {} |",
         if hazard { "yes" } else { "no" },
         d["runs"],
-        f(&d, "landing_err_p50_m", 2),
-        f(&d, "landing_err_p95_m", 2),
-        f(&d, "landing_err_max_m", 2),
+        f(d, "landing_err_p50_m", 2),
+        f(d, "landing_err_p95_m", 2),
+        f(d, "landing_err_max_m", 2),
         {
             // Where the unsafe touchdowns came from: a spot the map passed that the
             // truth calls unsafe, or a safe spot the lander missed.
@@ -824,20 +824,20 @@ fn descent_row(map_label: &str, label: &str, hazard: bool, d: &Value) -> String 
         if hazard {
             format!(
                 "{} / {}",
-                f(&d, "site_from_target_p50_m", 1),
-                f(&d, "site_from_target_p95_m", 1)
+                f(d, "site_from_target_p50_m", 1),
+                f(d, "site_from_target_p95_m", 1)
             )
         } else {
             "–".into()
         },
-        f(&d, "nav_err_rms_m", 2),
-        f(&d, "nav_err_at_landing_p95_m", 2),
+        f(d, "nav_err_rms_m", 2),
+        f(d, "nav_err_at_landing_p95_m", 2),
         d["fixes"],
         d["odometry_fixes"],
-        f(&d, "offset_nees_mean", 2),
+        f(d, "offset_nees_mean", 2),
         pct("nees_in_band_frac"),
         pct("final_nees_in_band_frac"),
-        f(&d, "nees_mean", 2)
+        f(d, "nees_mean", 2)
     )
 }
 
