@@ -366,8 +366,9 @@ pub fn print_report(r: &InsarReport, out: &Path) {
         );
     }
     println!(
-        "tile       {} features; InSAR {:.2} s{}",
+        "tile       {} features ({} of them on a truth-built tile's: ground, not noise); InSAR {:.2} s{}",
         r.tile_features,
+        r.tile_features_on_truth,
         r.insar_s,
         r.sar
             .as_ref()

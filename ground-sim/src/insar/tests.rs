@@ -326,6 +326,7 @@ fn the_real_lola_tile_runs_through_the_whole_chain() {
         "coherence_mean",
         "crlb_height_m",
         "tile_features",
+        "tile_features_on_truth",
     ] {
         assert!(v.get(k).is_some_and(|x| x.is_number()), "report lacks {k}");
     }
@@ -1262,4 +1263,46 @@ fn the_filtered_noise_correlation_sets_the_rehearsals_blur() {
         20.0,
     );
     assert_eq!(none, 0.0);
+}
+
+/// The map-feature census against the truth (`products::features_on_truth`): a tile finds every
+/// one of its features on the ground it was built from, and few on other ground (the same
+/// preset drawn with another seed), so the count says how many of a map's blobs are ground.
+#[test]
+fn features_on_truth_counts_a_tiles_own_ground_and_little_of_another() {
+    use crate::reference::noise_floor::FrameNoise;
+    use crate::reference::{
+        INSAR_SMOOTHING_M, Smoothing, TILE_FILE, reference_dem, write_reference,
+    };
+    use crate::terrain::{Preset, TerrainParams, generate};
+    let ground = |seed: u64| {
+        let mut p = TerrainParams::new(Preset::Shoemaker);
+        p.size_m = 2000.0;
+        p.seed = seed;
+        let (dem, _) = generate(&p, &indicatif::ProgressBar::hidden()).unwrap();
+        reference_dem(&dem, 20.0).unwrap()
+    };
+    let (own, other) = (ground(1), ground(2));
+    let surf =
+        crate::reference::surf_config_for(&FrameNoise::default_sensor(), 20.0, INSAR_SMOOTHING_M)
+            .unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let smoothing = Smoothing {
+        target_m: INSAR_SMOOTHING_M,
+        ..Smoothing::default_for_truth()
+    };
+    let n = write_reference(&own, dir.path(), &surf, 8192, smoothing)
+        .unwrap()
+        .features;
+    let bytes = std::fs::read(dir.path().join(TILE_FILE)).unwrap();
+    let on_own =
+        super::products::features_on_truth(&bytes, &own, &surf, INSAR_SMOOTHING_M).unwrap();
+    let on_other =
+        super::products::features_on_truth(&bytes, &other, &surf, INSAR_SMOOTHING_M).unwrap();
+    eprintln!("{n} features: {on_own} on their own ground, {on_other} on another");
+    assert!(n >= 20, "too few features to test with: {n}");
+    assert_eq!(on_own, n);
+    assert!(4 * on_other < n, "{on_other} of {n} on another ground");
+    // Garbage in: a clear error, not a count.
+    assert!(super::products::features_on_truth(&bytes[..10], &own, &surf, 50.0).is_err());
 }
