@@ -606,20 +606,9 @@ pub fn run(a: &Args, dispatch: &dyn Fn(&[String]) -> anyhow::Result<()>) -> anyh
         md,
         "The filter (`nav_core::filter`) takes each fix and each odometry offset with the covariance nav-core reports, no inflation. Successive fixes see mostly the same ground, so their errors are not independent: half of each covariance (`FilterConfig::fix_shared_fraction`; over a map that claims height noise of its own, e.g. an InSAR tile, the larger share `nav_core::filter::map_noise_share` gives it) is carried as a fix-error state that the next measurement keeps in proportion to the footprints' overlap, topped up with fresh error whenever a measurement's own shared part exceeds it (the fixes' σ grows several-fold as the frames get finer), the rest is white. As the footprint shrinks on the way down, a drift state (`FilterConfig::fix_scale_drift`) lets the fix error move smoothly with the log of its side, so the filter does not read that trend as velocity. NEES here is the filter's horizontal NEES at every frame (2 dof; 95 % band 0.05–7.38); \"final\" is the phase below 2 km. \"Offset NEES\" scores each odometry offset against the truth displacement under its own covariance (2 if its σ is right).\n"
     )?;
-    writeln!(
-        md,
-        "| map | aiding | hazard avoidance | runs | landing error p50 / p95 / max (m) | safe touchdowns | … where ≥ 50 % of the ground within 30 m of the target is safe (runs) | ground within 10 m of the targets safe | site from target p50 / p95 (m) | nav error RMS (m) | nav error at touchdown p95 (m) | fixes / offsets accepted | offset NEES mean | NEES in 95 % band (all / final) | mean NEES |"
-    )?;
-    writeln!(
-        md,
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
-    )?;
+    writeln!(md, "{DESCENT_TABLE_HEAD}")?;
     let mut first = true;
-    for (preset, map_label) in [
-        ("lola", "LOLA-calibrated"),
-        ("shoemaker", "Shoemaker-like floor"),
-        ("plains", "smooth plains"),
-    ] {
+    for (preset, map_label) in DESCENT_MAPS {
         let (dem, tile) = (w(&format!("{preset}16.tif")), w(&format!("{preset}16-ref")));
         go(&[
             "terrain",
@@ -701,6 +690,26 @@ pub fn run(a: &Args, dispatch: &dyn Fn(&[String]) -> anyhow::Result<()>) -> anyh
     Ok(())
 }
 
+/// The 16 km descent maps: suite preset and the label the tables give it. The InSAR descents
+/// fly the same scenes (made by the truth descents' section first).
+const DESCENT_MAPS: [(&str, &str); 3] = [
+    ("lola", "LOLA-calibrated"),
+    ("shoemaker", "Shoemaker-like floor"),
+    ("plains", "smooth plains"),
+];
+
+/// Header of every descent table, matching [`descent_row`]'s columns.
+const DESCENT_TABLE_HEAD: &str = "| map | aiding | hazard avoidance | runs | landing error p50 / p95 / max (m) | safe touchdowns | … where ≥ 50 % of the ground within 30 m of the target is safe (runs) | ground within 10 m of the targets safe | site from target p50 / p95 (m) | nav error RMS (m) | nav error at touchdown p95 (m) | fixes / offsets accepted | offset NEES mean | NEES in 95 % band (all / final) | mean NEES |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|";
+
+/// The default radar in words, for the sections whose maps `insar` makes with it.
+fn default_radar_words() -> String {
+    ground_sim::evaluation::suite::radar_words(
+        &ground_sim::sar::RadarPreset::default().config(),
+        ground_sim::insar::pipeline::LookDirections::of_preset(Default::default()),
+        1,
+    )
+}
+
 /// Descents over InSAR maps of the same 16 km scenes (the default radar, hazard avoidance on):
 /// the product the flyer flies against, where the map's own error reaches the touchdown.
 fn insar_descent_section(
@@ -714,27 +723,14 @@ fn insar_descent_section(
     writeln!(
         md,
         "The same 16 km scenes, hops and seeds, the tile now made by `ground-sim insar` from each scene (the default radar: {}, radar seed {seed}), hazard avoidance on. Frames still come from the truth DEM. Here the map's own error (its height noise, and the blobs it puts a little off where the frames find them) moves every fix near the target alike, so the flyer carries it to the ground: the landing error to the spot aimed at stays small (the hazard map and the odometry are the flyer's own frames), while the navigation error at touchdown is the distance from the intended target's ground.\n",
-        ground_sim::evaluation::suite::radar_words(
-            &ground_sim::sar::RadarPreset::default().config(),
-            ground_sim::insar::pipeline::LookDirections::of_preset(Default::default()),
-            1,
-        )
+        default_radar_words()
     )?;
-    writeln!(
-        md,
-        "| map | aiding | hazard avoidance | runs | landing error p50 / p95 / max (m) | safe touchdowns | … where ≥ 50 % of the ground within 30 m of the target is safe (runs) | ground within 10 m of the targets safe | site from target p50 / p95 (m) | nav error RMS (m) | nav error at touchdown p95 (m) | fixes / offsets accepted | offset NEES mean | NEES in 95 % band (all / final) | mean NEES |"
-    )?;
-    writeln!(
-        md,
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
-    )?;
+    writeln!(md, "{DESCENT_TABLE_HEAD}")?;
     let mut verdicts = Vec::new();
     let mut maps = Vec::new();
-    for (preset, map_label) in [
-        ("lola", "LOLA-calibrated, InSAR"),
-        ("shoemaker", "Shoemaker-like floor, InSAR"),
-        ("plains", "smooth plains, InSAR"),
-    ] {
+    for (preset, map_label) in DESCENT_MAPS {
+        let map_label = format!("{map_label}, InSAR");
+        let map_label = map_label.as_str();
         let dem = w(&format!("{preset}16.tif"));
         let tile = w(&format!("{preset}16-insar"));
         go(&[
@@ -856,11 +852,7 @@ fn insar_section(
     writeln!(
         md,
         "Each preset through `ground-sim insar` (SAR echoes, focusing, interferogram, DEM at 20 m, tile with 50 m terrain smoothing (`ground_sim::reference::INSAR_SMOOTHING_M`) and the detector threshold of every tile, twice the sensor's noise floor (`ground_sim::reference::noise_floor`); the default radar: {}, radar seed {seed}), then the Fig. 7 frames and an `eval` campaign (same seed and frames as above) against that tile. Frames still come from the truth DEM, as the flyer's sensor sees the real terrain. The paper's noise-free radar (`--radar paper`) is flown over the suite's scenes in the suite section.\n",
-        ground_sim::evaluation::suite::radar_words(
-            &ground_sim::sar::RadarPreset::default().config(),
-            ground_sim::insar::pipeline::LookDirections::of_preset(Default::default()),
-            1,
-        )
+        default_radar_words()
     )?;
     let mut dem_rows = String::new();
     let mut case_rows = String::new();

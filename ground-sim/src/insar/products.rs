@@ -175,8 +175,8 @@ pub fn white_noise_m(p: &InsarProduct) -> f64 {
 }
 
 /// Largest distance, tile pixels, at which a map feature counts as the truth's
-/// ([`features_on_truth`]): the refinement's capture range, well inside a blob's own size at
-/// the 50 m smoothing (σ ≥ 2.5 px).
+/// ([`features_on_truth`]): within a blob's own size under the tile's 50 m smoothing (2.5 px
+/// at 20 m), so a blob the map's noise moved a little still counts, one a blob away does not.
 pub const ON_TRUTH_RADIUS_PX: f32 = 2.0;
 /// Scale ratio band within which a map feature counts as the same blob as a truth feature.
 pub const ON_TRUTH_SCALE_BAND: (f32, f32) = (0.7, 1.4);
