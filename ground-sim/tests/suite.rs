@@ -70,11 +70,22 @@ fn quick_suite_outputs_agree_with_each_other() {
     assert!(out.join("suite.png").exists() && out.join("suite.md").exists());
     let table = std::fs::read_to_string(out.join("suite.md")).unwrap();
     assert!(table.contains("| lola | truth") && table.contains("| fresh-rim | insar"));
+    assert!(table.contains(" ground) |"), "{table}");
     assert!(table.contains("budget flight"), "{table}");
     for row in rows {
         let scene = row["scene"].as_str().unwrap();
         let s = &row["summary"];
         let kind = row["kind"].as_str().unwrap();
+        // Only an InSAR tile counts its ground (a truth tile is all ground), and never more
+        // than it holds.
+        let ground = &row["tile_features_on_truth"];
+        match kind {
+            "insar" => assert!(
+                ground.as_u64().unwrap() <= row["tile_features"].as_u64().unwrap(),
+                "{row}"
+            ),
+            _ => assert!(ground.is_null(), "{row}"),
+        }
         let tag = if s["prior"].is_null() {
             format!("{kind}-noprior")
         } else {
@@ -428,7 +439,11 @@ fn trade_runs_a_design_point_end_to_end() {
     // Noise-free, the 8 m radar maps lola to about a metre (1.09 m on the 4 km scene).
     assert!(crlb > 0.0 && crlb < 5.0, "CRLB {crlb}");
     assert!(rmse > 0.0 && rmse < 3.0, "height RMSE {rmse}");
-    assert!(p["tile_features"].as_u64().unwrap() > 20);
+    let feats = p["tile_features"].as_u64().unwrap();
+    assert!(feats > 20);
+    // Noise-free at 8 m most of the map's blobs are ground, and never more than it has.
+    let ground = p["tile_features_on_truth"].as_u64().unwrap();
+    assert!(ground <= feats && 2 * ground > feats, "{ground} of {feats}");
     let success = p["success_rate"].as_f64().unwrap();
     assert!((0.0..=1.0).contains(&success));
     assert_eq!(p["false_fixes"].as_u64(), Some(0));

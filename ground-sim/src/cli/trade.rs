@@ -86,6 +86,9 @@ pub struct TradePoint {
     pub valid_fraction: f64,
     /// Features in the tile.
     pub tile_features: usize,
+    /// Of those, the ones a truth-built tile on the same grid holds too (the map's blobs that
+    /// are ground; `insar::products::features_on_truth`).
+    pub tile_features_on_truth: usize,
     /// TRN success rate.
     pub success_rate: f64,
     /// False fixes (> 3 reference pixels).
@@ -248,17 +251,21 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
             slope_rmse_deg: sr.insar_slope_rmse_deg.unwrap_or(f64::NAN),
             valid_fraction: sr.insar_valid_frac.unwrap_or(f64::NAN),
             tile_features: row.tile_features,
+            tile_features_on_truth: row
+                .tile_features_on_truth
+                .context("a trade point's tile is an InSAR tile, which counts its ground")?,
             success_rate: row.summary.success_rate,
             false_fixes: row.summary.false_fixes,
             pos_err_p95_m: row.summary.pos_err_p95_m,
             seconds: t.elapsed().as_secs_f64(),
         };
         let line = format!(
-            "{tag:<34} height {:.2} m (CRLB {:.2}), slope {:.2}°, {} features, TRN {:.1} %, {} false",
+            "{tag:<34} height {:.2} m (CRLB {:.2}), slope {:.2}°, {} features ({} ground), TRN {:.1} %, {} false",
             p.height_rmse_m,
             p.crlb_height_m,
             p.slope_rmse_deg,
             p.tile_features,
+            p.tile_features_on_truth,
             100.0 * p.success_rate,
             p.false_fixes
         );
@@ -317,11 +324,11 @@ pub fn table_markdown(r: &TradeReport) -> String {
             .map_or(String::new(), |d| format!("diffuse surface term {d} dB, ")),
         r.budget
     );
-    s += "| scene | looks | passes | baseline | NESZ | CRLB | height RMSE (/CRLB) | slope RMSE | valid | tile feat. | TRN success | false | p95 |\n";
+    s += "| scene | looks | passes | baseline | NESZ | CRLB | height RMSE (/CRLB) | slope RMSE | valid | tile feat. (ground) | TRN success | false | p95 |\n";
     s += "|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
     for p in &r.points {
         s += &format!(
-            "| {} | {} | {} | {} m | {} | {:.2} m | {:.2} m ({:.2}) | {:.2}° | {:.1} % | {} | {:.1} % | {} | {} |\n",
+            "| {} | {} | {} | {} m | {} | {:.2} m | {:.2} m ({:.2}) | {:.2}° | {:.1} % | {} ({}) | {:.1} % | {} | {} |\n",
             p.scene,
             p.looks.name(),
             p.passes,
@@ -333,6 +340,7 @@ pub fn table_markdown(r: &TradeReport) -> String {
             p.slope_rmse_deg,
             100.0 * p.valid_fraction,
             p.tile_features,
+            p.tile_features_on_truth,
             100.0 * p.success_rate,
             p.false_fixes,
             if p.pos_err_p95_m.is_finite() {

@@ -212,6 +212,9 @@ pub struct SuiteRow {
     pub kind: TileKind,
     /// Features in the tile.
     pub tile_features: usize,
+    /// Of those, the ones a truth-built tile on the same grid holds too (InSAR tiles only,
+    /// `insar::products::features_on_truth`): the map's blobs that are ground, not noise.
+    pub tile_features_on_truth: Option<usize>,
     /// The campaign's summary (the prior is in it).
     pub summary: EvalSummary,
     /// The navigability map (footprint rule) against the campaign's outcomes.
@@ -313,7 +316,7 @@ pub fn run_scene(
     for &kind in &spec.kinds {
         let tdir = dir.join(kind.name());
         progress.set_message(format!("{}: {} tile", scene.name, kind.name()));
-        let features = match kind {
+        let (features, on_truth) = match kind {
             TileKind::Truth => {
                 let r = reference_dem(&dem, spec.reference_pixel_m)?;
                 let surf = surf_config_for(
@@ -321,14 +324,15 @@ pub fn run_scene(
                     spec.reference_pixel_m,
                     DEFAULT_SMOOTHING_M,
                 )?;
-                write_reference(
+                let n = write_reference(
                     &r,
                     &tdir,
                     &surf,
                     MAX_TILE_FEATURES,
                     Smoothing::default_for_truth(),
                 )?
-                .features
+                .features;
+                (n, None)
             }
             TileKind::Insar => {
                 let cfg = InsarConfig {
@@ -357,7 +361,7 @@ pub fn run_scene(
                 report.insar_slope_rmse_deg = Some(r.accuracy.slope_rmse_deg);
                 report.insar_valid_frac = Some(r.accuracy.valid_fraction);
                 report.insar_crlb_height_m = Some(r.accuracy.crlb_height_m);
-                r.tile_features
+                (r.tile_features, Some(r.tile_features_on_truth))
             }
         };
         let reference = crate::reference::load(&tdir)?;
@@ -468,6 +472,7 @@ pub fn run_scene(
                 scene: scene.name.clone(),
                 kind,
                 tile_features: features,
+                tile_features_on_truth: on_truth,
                 summary,
                 navmap: nm,
                 navmap_go_fraction: navmap.go_fraction(),
@@ -700,10 +705,12 @@ pub fn table_markdown(r: &SuiteReport) -> String {
             }
         };
         s += &format!(
-            "| {} | {} ({} feat.) | {} | {:.1} % | {} | {:.1} % {} | {} / {} | {} | {} | {} | {:.2} | {} | {} | {} |\n",
+            "| {} | {} ({} feat.{}) | {} | {:.1} % | {} | {:.1} % {} | {} / {} | {} | {} | {} | {:.2} | {} | {} | {} |\n",
             row.scene,
             row.kind.name(),
             row.tile_features,
+            row.tile_features_on_truth
+                .map_or(String::new(), |n| format!(", {n} ground")),
             e.prior.map_or("none".into(), |p| format!(
                 "{} m, {}°",
                 p.sigma_m, p.heading_sigma_deg

@@ -265,6 +265,80 @@ pub fn phase_crlb_rad(gamma: f64, looks: f64) -> f64 {
     ((1.0 - g2) / (2.0 * looks * g2)).sqrt()
 }
 
+/// Phase CRLB of `passes` stacked passes of one track that share their speckle, rad.
+///
+/// `gamma` is the stack's coherence (all passes' sums together) and `thermal` the receiver
+/// noise's share of it (the coherence of two passes of one antenna is `SNR/(1 + SNR)`, and the
+/// interferometric pair's thermal coherence is the geometric mean of its two antennas', see
+/// [`passes_thermal_coherence`]). Only the thermal part of the phase variance averages over
+/// the passes; what the surface decorrelates (the coherence `gamma/thermal`) is the same in
+/// every pass, because the passes see the same speckle. So the variance is that of the surface
+/// part at `looks_per_pass` looks plus the rest of the one-pass variance divided by `passes`.
+/// With one pass (or `thermal` unknown, ≤ 0) it is [`phase_crlb_rad`] at `looks_per_pass ×
+/// passes`, the bound that counts every pass as independent looks.
+///
+/// Why: counting all passes as looks claimed 0.50 m of height noise for a 4-pass InSAR map of
+/// smooth plains whose error was 0.72 m (RMSE/CRLB 1.44 against 1.13 for one pass), and the
+/// navigation filter, which takes the map's noise from that bound, trusted its fixes too much.
+pub fn stacked_phase_crlb_rad(gamma: f64, thermal: f64, looks_per_pass: f64, passes: usize) -> f64 {
+    let n = passes.max(1) as f64;
+    if passes <= 1 || !(thermal > 0.0) {
+        return phase_crlb_rad(gamma, looks_per_pass * n);
+    }
+    let one = phase_crlb_rad(gamma, looks_per_pass);
+    let surface = phase_crlb_rad((gamma / thermal.min(1.0)).min(1.0), looks_per_pass);
+    if !(one.is_finite() && surface.is_finite()) {
+        return one;
+    }
+    let (v1, vs) = (one * one, surface * surface);
+    (vs + (v1 - vs).max(0.0) / n).sqrt()
+}
+
+/// Thermal coherence of a stack's interferometric pair per output window, from the passes
+/// themselves: consecutive passes of one antenna share the ground and its speckle and differ
+/// by receiver noise only, so their coherence is `SNR/(1 + SNR)` of that antenna. The pair's is
+/// the geometric mean of the two antennas' (`1/sqrt((1 + 1/SNR₁)(1 + 1/SNR₂))`). `passes1` and
+/// `passes2` hold each pass's SLC of antenna 1 and 2 on their own (uncoregistered, same track)
+/// grids. `None` with fewer than two passes or when the shapes differ.
+pub fn passes_thermal_coherence(
+    passes1: &[&[C32]],
+    passes2: &[&[C32]],
+    lines: usize,
+    gates: usize,
+    w: LookWindow,
+) -> Option<Vec<f32>> {
+    if passes1.len() < 2 || passes1.len() != passes2.len() {
+        return None;
+    }
+    let zero = vec![0.0f64; gates];
+    let antenna = |p: &[&[C32]]| -> Option<Vec<f32>> {
+        let mut acc: Option<Looks> = None;
+        for pair in p.windows(2) {
+            let (a, b) = (pair.first()?, pair.get(1)?);
+            if a.len() != lines * gates || b.len() != lines * gates {
+                return None;
+            }
+            let l = multilook(a, b, lines, gates, &zero, w);
+            match acc.as_mut() {
+                None => acc = Some(l),
+                Some(s) => {
+                    if !s.add_pass(&l) {
+                        return None;
+                    }
+                }
+            }
+        }
+        acc.map(|l| l.coherence())
+    };
+    let (r1, r2) = (antenna(passes1)?, antenna(passes2)?);
+    Some(
+        r1.iter()
+            .zip(&r2)
+            .map(|(a, b)| (a.max(0.0) * b.max(0.0)).sqrt())
+            .collect(),
+    )
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -359,5 +433,55 @@ mod tests {
         // Identical images are fully coherent.
         let l2 = multilook(&a1, &a1, lines, gates, &vec![0.0; gates], w);
         assert!(l2.coherence().iter().all(|&c| (c - 1.0).abs() < 1e-6));
+    }
+
+    #[test]
+    fn stacked_crlb_averages_only_the_thermal_part() {
+        let (l, g) = (6.5, 0.9);
+        // One pass, or no thermal estimate: the plain bound at all the looks.
+        assert_eq!(stacked_phase_crlb_rad(g, 0.95, l, 1), phase_crlb_rad(g, l));
+        assert_eq!(
+            stacked_phase_crlb_rad(g, 0.0, l, 4),
+            phase_crlb_rad(g, 4.0 * l)
+        );
+        // All of the decorrelation thermal: the passes are independent looks.
+        let all_thermal = stacked_phase_crlb_rad(g, g, l, 4);
+        assert!((all_thermal - phase_crlb_rad(g, 4.0 * l)).abs() < 1e-12);
+        // None of it thermal: stacking the same speckle gains nothing.
+        let none_thermal = stacked_phase_crlb_rad(g, 1.0, l, 4);
+        assert!((none_thermal - phase_crlb_rad(g, l)).abs() < 1e-12);
+        // In between, between the two, and more passes never hurt.
+        let half = stacked_phase_crlb_rad(g, g.sqrt(), l, 4);
+        assert!(half > all_thermal && half < none_thermal, "{half}");
+        assert!(stacked_phase_crlb_rad(g, g.sqrt(), l, 16) < half);
+        assert!(stacked_phase_crlb_rad(0.0, 0.5, l, 4).is_infinite());
+    }
+
+    #[test]
+    fn passes_of_one_antenna_measure_its_snr() {
+        use rand::{RngExt, SeedableRng};
+        // A shared speckled signal of power 1 plus independent noise of power 0.25 per pass
+        // (SNR 4: thermal coherence 0.8 per antenna); antenna 2 at SNR 1 (0.5).
+        let (lines, gates, passes) = (64, 64, 3);
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(7);
+        let mut gauss = |s: f64| -> C32 {
+            let (u1, u2): (f64, f64) = (rng.random::<f64>().max(1e-12), rng.random());
+            let r = (-2.0 * u1.ln()).sqrt() * s * std::f64::consts::FRAC_1_SQRT_2;
+            let t = std::f64::consts::TAU * u2;
+            C32::new((r * t.cos()) as f32, (r * t.sin()) as f32)
+        };
+        let x: Vec<C32> = (0..lines * gates).map(|_| gauss(1.0)).collect();
+        let mut pass = |sn: f64| -> Vec<C32> { x.iter().map(|&v| v + gauss(sn)).collect() };
+        let p1: Vec<Vec<C32>> = (0..passes).map(|_| pass(0.5)).collect();
+        let p2: Vec<Vec<C32>> = (0..passes).map(|_| pass(1.0)).collect();
+        let r1: Vec<&[C32]> = p1.iter().map(Vec::as_slice).collect();
+        let r2: Vec<&[C32]> = p2.iter().map(Vec::as_slice).collect();
+        let w = LookWindow { size: 16, step: 16 };
+        let t = passes_thermal_coherence(&r1, &r2, lines, gates, w).unwrap();
+        let mean = t.iter().map(|&v| f64::from(v)).sum::<f64>() / t.len() as f64;
+        let expect = (0.8f64 * 0.5).sqrt();
+        assert!((mean - expect).abs() < 0.03, "{mean} vs {expect}");
+        // One pass has no partner to compare with.
+        assert!(passes_thermal_coherence(&r1[..1], &r2[..1], lines, gates, w).is_none());
     }
 }

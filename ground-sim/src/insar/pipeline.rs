@@ -19,14 +19,16 @@ use super::geocode::{
     GeocodeParams, OutputGrid, RadarPixels, eq20_mask, geocode, label, ray_trace_mask,
 };
 use super::geometry::{PairGeometry, wrap_rad};
-use super::looks::{LookWindow, equivalent_looks_1d, multilook, phase_crlb_rad};
+use super::looks::{
+    LookWindow, equivalent_looks_1d, multilook, passes_thermal_coherence, stacked_phase_crlb_rad,
+};
 use super::unwrap::unwrap_quality_guided;
 use super::{InsarError, InsarResult};
 use crate::dem::Dem;
 use crate::dem::stats::CellCounts;
 use crate::sar::kernel::SincKernel;
 use crate::sar::pipeline::{InsarPair, SimOptions, Timings, simulate_with};
-use crate::sar::{Antenna, Polarisation, SarConfig, SarDem, Slc};
+use crate::sar::{Antenna, C32, Polarisation, SarConfig, SarDem, Slc};
 
 /// Processing parameters. Defaults are the paper's (8×8 window, step 4, 20 m) plus our
 /// thresholds, documented in `docs/insar.md`.
@@ -290,7 +292,8 @@ pub struct InsarProduct {
     /// Radar-geometry layers.
     pub radar: RadarLayers,
     /// Equivalent independent looks of one window, times the stacked passes
-    /// ([`InsarConfig::passes`]).
+    /// ([`InsarConfig::passes`]): the receiver noise's looks. The surface's decorrelation has one
+    /// pass's looks (the passes share their speckle; `looks::stacked_phase_crlb_rad`).
     pub effective_looks: f64,
     /// Factor, 0–1, by which the DEM filter shrank the height CRLB of every cell whose filter
     /// kernel lay on valid cells ([`dem_filter_noise_factor`]; 1 without the filter). Cells by
@@ -628,10 +631,22 @@ pub fn process_stack(
     };
 
     // 5. Heights (eq 17 with each pixel's R1 and θ1), CRLB.
-    // Stacked passes multiply the looks (their receiver noise is independent).
-    let looks_eff = equivalent_looks_1d(w.size, cfg.azimuth_oversampling, cfg.hamming_alpha)
-        * equivalent_looks_1d(w.size, cfg.range_oversampling, cfg.hamming_alpha)
-        * pairs.len() as f64;
+    // Stacked passes multiply the looks of the receiver noise only: they share their speckle,
+    // so what the surface decorrelates is the same in every pass (`stacked_phase_crlb_rad`,
+    // with the thermal share measured between the passes themselves).
+    let looks_pass = equivalent_looks_1d(w.size, cfg.azimuth_oversampling, cfg.hamming_alpha)
+        * equivalent_looks_1d(w.size, cfg.range_oversampling, cfg.hamming_alpha);
+    let looks_eff = looks_pass * pairs.len() as f64;
+    let thermal = if pairs.len() > 1 {
+        let p1: Vec<&[C32]> = pairs.iter().map(|(a, _)| a.data.as_slice()).collect();
+        let p2: Vec<&[C32]> = pairs.iter().map(|(_, b)| b.data.as_slice()).collect();
+        Some(
+            passes_thermal_coherence(&p1, &p2, lines, gates, w)
+                .ok_or_else(|| InsarError::Input("the passes' SLCs differ in shape".into()))?,
+        )
+    } else {
+        None
+    };
     let mut z = vec![0.0f64; lo * co];
     let mut sig = vec![0.0f64; lo * co];
     for k in 0..lo {
@@ -639,7 +654,12 @@ pub fn process_stack(
             let i = k * co + m;
             let r1 = g.range_m(w.centre(m));
             z[i] = g.datum_m + g.height_m(unw[i], r1);
-            sig[i] = phase_crlb_rad(f64::from(coh[i]), looks_eff) * g.ambiguity_height_m(r1)
+            let t = thermal
+                .as_ref()
+                .and_then(|t| t.get(i))
+                .map_or(0.0, |&v| f64::from(v));
+            sig[i] = stacked_phase_crlb_rad(f64::from(coh[i]), t, looks_pass, pairs.len())
+                * g.ambiguity_height_m(r1)
                 / std::f64::consts::TAU;
         }
     }

@@ -75,7 +75,8 @@ pub struct InsarReport {
     pub tile_features_on_truth: usize,
     /// The reference tile summary.
     pub tile: TileSummary,
-    /// Equivalent independent looks of one multilook window, times the stacked passes.
+    /// Equivalent independent looks of one multilook window, times the stacked passes (the
+    /// receiver noise's; the surface's decorrelation keeps one pass's).
     pub effective_looks: f64,
     /// Factor, 0–1, by which the DEM filter shrank the height CRLB of cells away from holes
     /// and edges (the looks' overlap keeps their noise correlated;

@@ -781,10 +781,10 @@ fn a_coarse_prior_dem_picks_the_cycles_the_datum_rule_gets_wrong() {
     );
 }
 
-/// Four passes of one track: the phase comes from four times the samples, so the CRLB halves
-/// and the noise's share of the height error follows it, at the size the CRLB states. At NESZ −15 dB over a 1 km tilted
-/// plane (one look) the noise dominates; the noise-free run gives the error floor that
-/// stacking cannot touch (the speckle is the same ground in every pass).
+/// Four passes of one track: the receiver noise's share of the height error halves, and so
+/// does that share of the CRLB, while the surface's share (the noise-free run's: the speckle is
+/// the same ground in every pass) stays. At NESZ −15 dB over a 1 km tilted plane (one look) the
+/// noise dominates.
 #[test]
 fn stacked_passes_shrink_the_height_error_as_the_crlb_says() {
     let t = 8f64.to_radians().tan();
@@ -818,10 +818,16 @@ fn stacked_passes_shrink_the_height_error_as_the_crlb_says() {
     let (one, l1) = run(&noisy, 1);
     let (four, l4) = run(&noisy, 4);
     assert!((l4 / l1 - 4.0).abs() < 1e-9, "{l1} {l4}");
-    let crlb_ratio = four.crlb_height_m / one.crlb_height_m;
+    // The bound's thermal part over four passes, its surface part (the noise-free run's) once:
+    // the CRLB reads the split from the passes themselves, a little high (the coherence of a
+    // finite window is biased up, which shifts variance to the surface part): measured 1.10×.
+    let (q, o) = (floor.crlb_height_m, one.crlb_height_m);
+    let split = (q * q + (o * o - q * q) / 4.0).sqrt();
+    let crlb_ratio = four.crlb_height_m / split;
     assert!(
-        crlb_ratio > 0.4 && crlb_ratio < 0.6,
-        "CRLB ratio {crlb_ratio}"
+        (1.0..1.2).contains(&crlb_ratio),
+        "four passes' CRLB {:.3} m against {split:.3} m from the split",
+        four.crlb_height_m
     );
     let noise = |a: &Accuracy| {
         (a.height_rmse_m.powi(2) - floor.height_rmse_m.powi(2))
@@ -834,15 +840,21 @@ fn stacked_passes_shrink_the_height_error_as_the_crlb_says() {
         "the noise should dominate one pass"
     );
     assert!(ratio > 0.35 && ratio < 0.7, "noise ratio {ratio}");
-    // The bound is the noise's own size, not a loose ceiling: before it followed the heights
-    // through the DEM filter it claimed twice the noise (0.44×); measured 0.80 and 0.76 (the
-    // geocoding's interpolation, which also averages, is not credited).
-    for (a, name) in [(&one, "one pass"), (&four, "four passes")] {
-        let honest = noise(a) / a.crlb_height_m;
+    // The bound is the error's own size, not a loose ceiling: before it followed the heights
+    // through the DEM filter it claimed twice the noise (0.44×); measured 0.90, 0.81 and 0.76
+    // (the geocoding's interpolation, which also averages, is not credited). Before the
+    // surface's share stopped averaging over passes, four passes read 0.85 here and 1.44 on
+    // the 16 km plains map, where the surface's share is most of it.
+    for (a, name) in [
+        (&floor, "noise-free"),
+        (&one, "one pass"),
+        (&four, "four passes"),
+    ] {
+        let honest = a.height_rmse_m / a.crlb_height_m;
         assert!(
             honest > 0.65 && honest <= 1.05,
-            "{name}: noise {:.3} m over its CRLB {:.3} m",
-            noise(a),
+            "{name}: error {:.3} m over its CRLB {:.3} m",
+            a.height_rmse_m,
             a.crlb_height_m
         );
     }
