@@ -820,7 +820,8 @@ fn stacked_passes_shrink_the_height_error_as_the_crlb_says() {
     assert!((l4 / l1 - 4.0).abs() < 1e-9, "{l1} {l4}");
     // The bound's thermal part over four passes, its surface part (the noise-free run's) once:
     // the CRLB reads the split from the passes themselves, a little high (the coherence of a
-    // finite window is biased up, which shifts variance to the surface part): measured 1.10×.
+    // finite window is biased up, which shifts variance to the surface part; the 1.0 floor
+    // rests on that direction): measured 1.10×.
     let (q, o) = (floor.crlb_height_m, one.crlb_height_m);
     let split = (q * q + (o * o - q * q) / 4.0).sqrt();
     let crlb_ratio = four.crlb_height_m / split;
@@ -844,7 +845,7 @@ fn stacked_passes_shrink_the_height_error_as_the_crlb_says() {
     // through the DEM filter it claimed twice the noise (0.44×); measured 0.90, 0.81 and 0.76
     // (the geocoding's interpolation, which also averages, is not credited). Before the
     // surface's share stopped averaging over passes, four passes read 0.85 here and 1.44 on
-    // the 16 km plains map, where the surface's share is most of it.
+    // the 16 km plains map (1.26 since; one pass 1.13).
     for (a, name) in [
         (&floor, "noise-free"),
         (&one, "one pass"),
