@@ -287,7 +287,7 @@ pub fn phase_crlb_rad(gamma: f64, looks: f64) -> f64 {
 /// navigation filter, which takes the map's noise from that bound, trusted its fixes too much.
 pub fn stacked_phase_crlb_rad(gamma: f64, thermal: f64, looks_per_pass: f64, passes: usize) -> f64 {
     if passes <= 1 {
-        return phase_crlb_rad(gamma, looks_per_pass * passes.max(1) as f64);
+        return phase_crlb_rad(gamma, looks_per_pass);
     }
     if !(thermal > 0.0 && thermal.is_finite()) {
         return phase_crlb_rad(gamma, looks_per_pass);
@@ -446,7 +446,7 @@ mod tests {
     #[test]
     fn stacked_crlb_averages_only_the_thermal_part() {
         let (l, g) = (6.5, 0.9);
-        // One pass, or no thermal estimate: the plain bound at all the looks.
+        // One pass: the plain bound.
         assert_eq!(stacked_phase_crlb_rad(g, 0.95, l, 1), phase_crlb_rad(g, l));
         // Several passes but no thermal estimate: nothing credited to stacking.
         assert_eq!(stacked_phase_crlb_rad(g, 0.0, l, 4), phase_crlb_rad(g, l));
