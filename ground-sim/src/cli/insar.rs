@@ -41,6 +41,11 @@ pub struct Args {
     /// every suite scene, but tiles not yet better for TRN; docs/insar.md).
     #[arg(long, value_enum, default_value_t = InsarConfig::default().dem_filter)]
     pub dem_filter: DemFilterKind,
+    /// Detect the tile's features on the DEM with its small holes filled (`tile
+    /// --fill-holes`; the tile's slope raster keeps them missing). An explicit option
+    /// (docs/insar.md, "Holes in the tile").
+    #[arg(long)]
+    pub fill_tile_holes: bool,
     /// σ of the DEM filter's Gaussian weights, output pixels (0 = no filter). Default: the
     /// kernel's (2 for `quadratic`, 1 for `gaussian`).
     #[arg(long)]
@@ -145,6 +150,7 @@ pub fn run_chain(a: &Args) -> anyhow::Result<Outcome> {
         min_coherence: a.min_coherence,
         unwrap: !a.no_unwrap,
         dem_filter: a.dem_filter,
+        fill_tile_holes: a.fill_tile_holes,
         dem_filter_sigma_px: a
             .dem_filter_sigma_px
             .unwrap_or_else(|| a.dem_filter.default_sigma_px()),
@@ -366,9 +372,17 @@ pub fn print_report(r: &InsarReport, out: &Path) {
         );
     }
     println!(
-        "tile       {} features ({} of them on a truth-built tile's: ground, not noise); InSAR {:.2} s{}",
+        "tile       {} features ({} of them on a truth-built tile's: ground, not noise){}; InSAR {:.2} s{}",
         r.tile_features,
         r.tile_features_on_truth,
+        if r.tile.holes.filled_cells > 0 {
+            format!(
+                ", detected with {} of the map's {} missing cells filled",
+                r.tile.holes.filled_cells, r.tile.holes.missing_cells
+            )
+        } else {
+            String::new()
+        },
         r.insar_s,
         r.sar
             .as_ref()

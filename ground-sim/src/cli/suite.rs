@@ -72,6 +72,10 @@ pub struct Args {
     /// quadratic fit at 2 px; docs/insar.md, "A filter without curvature bias").
     #[arg(long, value_enum, default_value_t = ground_sim::insar::InsarConfig::default().dem_filter)]
     pub dem_filter: ground_sim::insar::pipeline::DemFilterKind,
+    /// InSAR tiles' features detected on their DEM with small holes filled (`insar
+    /// --fill-tile-holes`). An explicit option (docs/insar.md, "Holes in the tile").
+    #[arg(long)]
+    pub fill_tile_holes: bool,
     /// Spacing of the navigability map's rehearsal sites, metres (0: no rehearsal, the
     /// footprint rule only).
     #[arg(long, default_value_t = REHEARSAL_STEP_M)]
@@ -171,6 +175,7 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         looks: super::insar::looks_or_preset(a.looks, &a.radar),
         passes: a.passes,
         dem_filter: a.dem_filter,
+        fill_tile_holes: a.fill_tile_holes,
         navmap: NavmapThresholds::default(),
         rehearsal,
         budget: a.budget.budget,

@@ -217,6 +217,7 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
             looks,
             passes,
             dem_filter: Default::default(),
+            fill_tile_holes: false,
             navmap: NavmapThresholds::default(),
             rehearsal: None,
             budget: a.budget.budget,

@@ -195,6 +195,9 @@ pub struct SuiteSpec {
     /// Kernel of the InSAR chain's DEM filter, at its default σ
     /// ([`crate::insar::pipeline::DemFilterKind::default_sigma_px`]).
     pub dem_filter: crate::insar::pipeline::DemFilterKind,
+    /// InSAR tiles' features from their DEM with small holes filled
+    /// ([`crate::insar::InsarConfig::fill_tile_holes`]).
+    pub fill_tile_holes: bool,
     /// Navigability-map thresholds (the footprint rule).
     pub navmap: NavmapThresholds,
     /// The navigability map by rehearsal, per campaign's prior mode (`None`: not flown).
@@ -340,6 +343,7 @@ pub fn run_scene(
                     passes: spec.passes,
                     dem_filter: spec.dem_filter,
                     dem_filter_sigma_px: spec.dem_filter.default_sigma_px(),
+                    fill_tile_holes: spec.fill_tile_holes,
                     ..InsarConfig::default()
                 };
                 let run = run_from_dem_looks(

@@ -65,6 +65,10 @@ pub struct InsarConfig {
     /// the pixel-scale height noise that the slope operator amplifies (measured in
     /// `docs/insar.md`).
     pub dem_filter_sigma_px: f64,
+    /// Detect the reference tile's features on the DEM with its small holes filled
+    /// (`reference::holes`; the tile's slope raster keeps them). Off by default: docs/insar.md,
+    /// "Holes in the tile (session 39)".
+    pub fill_tile_holes: bool,
     /// Passes of the speckle-centroid correction ([`recentre_heights`]; 0 = none, the paper's
     /// processing). Not in the paper: see `docs/insar.md`.
     pub recentre_passes: usize,
@@ -99,6 +103,7 @@ impl Default for InsarConfig {
             geocode: GeocodeParams::default(),
             dem_filter: DemFilterKind::Gaussian,
             dem_filter_sigma_px: DemFilterKind::Gaussian.default_sigma_px(),
+            fill_tile_holes: false,
             recentre_passes: 2,
             range_oversampling: 2.0,
             azimuth_oversampling: 2.0,

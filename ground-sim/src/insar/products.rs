@@ -255,6 +255,7 @@ pub fn write_outputs(
             inherent_m: p.config.inherent_smoothing_m(),
             one_look_share: p.look_fusion.map_or(1.0, |f| f.one_look_share_for_frames()),
             height_noise_m: white_noise_m(p),
+            fill_holes: p.config.fill_tile_holes,
         },
     )
     .context("building the reference tile")?;

@@ -14,9 +14,10 @@ use serde::Serialize;
 use crate::dem::{
     Dem, GeoRef, GeoTransform, Interpolation, read_geotiff, resample_to_pixel, write_geotiff,
 };
-use crate::reference::tile::{GeoGrid, build_tile};
+use crate::reference::tile::{GeoGrid, build_tile_over};
 
 pub mod atlas;
+pub mod holes;
 pub mod noise_floor;
 pub mod tile;
 
@@ -58,6 +59,11 @@ pub struct TileSummary {
     /// Of the terrain smoothing, the σ applied by the tile builder, metres (the rest the DEM
     /// already had).
     pub smoothing_applied_m: f64,
+    /// Missing cells of the reference DEM, and how many of them the builder filled to detect
+    /// the features (holes within one smoothing σ of valid heights, only with
+    /// [`Smoothing::fill_holes`]; [`holes`]). The folder's `reference-dem.tif` and the tile's
+    /// slope raster keep them missing.
+    pub holes: holes::HoleFill,
 }
 
 /// A loaded reference folder.
@@ -234,6 +240,10 @@ pub struct Smoothing {
     /// metres (an InSAR DEM: `insar::products::white_noise_m`), recorded in the tile
     /// (`nav_core::TileHeader::height_noise_m`). 0 = none claimed (a truth DEM).
     pub height_noise_m: f64,
+    /// Detect the tile's features on the DEM with its small holes filled (every cell within
+    /// `target_m` of valid heights, [`holes::fill_small_holes`]); the tile's slope raster keeps
+    /// them missing. Off by default (docs/insar.md, "Holes in the tile", session 39).
+    pub fill_holes: bool,
 }
 
 impl Smoothing {
@@ -244,6 +254,7 @@ impl Smoothing {
             inherent_m: 0.0,
             one_look_share: 1.0,
             height_noise_m: 0.0,
+            fill_holes: false,
         }
     }
     /// σ to apply, metres.
@@ -326,7 +337,21 @@ pub fn write_reference_with(
         );
     }
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    // Features come from the DEM with its small holes filled; the raster that area search
+    // and the slope confirmation compare cell by cell keeps them missing, as a filled height
+    // is not a measurement.
+    let fill_radius_m = if smoothing.fill_holes {
+        smoothing.target_m
+    } else {
+        0.0
+    };
+    let (filled, hole_fill) = holes::fill_small_holes(ref_dem, fill_radius_m)?;
     let px = reference_slope_px(ref_dem, smoothing.applied_m())?;
+    let px_filled = if hole_fill.filled_cells > 0 {
+        reference_slope_px(&filled, smoothing.applied_m())?
+    } else {
+        px.clone()
+    };
     let slope = Dem::new(
         ref_dem.width(),
         ref_dem.height(),
@@ -336,7 +361,7 @@ pub fn write_reference_with(
         ref_dem.geo.clone(),
     )?;
     let pixel_m = ref_dem.pixel_m()?;
-    let img = SlopeImage::new_checked(&px, slope.width(), slope.height(), pixel_m as f32)
+    let img = SlopeImage::new_checked(&px_filled, slope.width(), slope.height(), pixel_m as f32)
         .map_err(|e| anyhow::anyhow!("reference slope: {e}"))?;
     let t = ref_dem.geo.transform.0;
     let grid = GeoGrid {
@@ -356,7 +381,7 @@ pub fn write_reference_with(
     };
     let ref_sigma = reference_sigma_m(smoothing.inherent_m, smoothing.one_look_share)
         .map(|b| (b as f64).hypot(frame_wide_m) as f32);
-    let bytes = build_tile(
+    let bytes = build_tile_over(
         &img,
         &grid,
         cfg,
@@ -364,6 +389,7 @@ pub fn write_reference_with(
         smoothing.target_m,
         ref_sigma,
         noise as f32,
+        &px,
     )?;
     let features = Tile::parse(&bytes)
         .map(|t| t.len())
@@ -384,6 +410,7 @@ pub fn write_reference_with(
         height_noise_m: f64::from(noise as f32),
         frame_wide_sigma_m: frame_wide_m,
         smoothing_applied_m: smoothing.applied_m(),
+        holes: hole_fill,
     };
     std::fs::write(
         dir.join(META_FILE),

@@ -70,6 +70,38 @@ pub fn build_tile(
     reference_sigma_m: [f32; 2],
     height_noise_m: f32,
 ) -> Result<Vec<u8>> {
+    build_tile_over(
+        slope,
+        grid,
+        cfg,
+        max_features,
+        smoothing_m,
+        reference_sigma_m,
+        height_noise_m,
+        slope.pixels(),
+    )
+}
+
+/// [`build_tile`] with features from `slope` and `raster` (same size) as the tile's slope
+/// raster in place of `slope`'s own pixels.
+#[allow(clippy::too_many_arguments)]
+pub fn build_tile_over(
+    slope: &SlopeImage<'_>,
+    grid: &GeoGrid,
+    cfg: &SurfConfig,
+    max_features: usize,
+    smoothing_m: f64,
+    reference_sigma_m: [f32; 2],
+    height_noise_m: f32,
+    raster: &[nav_core::SlopePx],
+) -> Result<Vec<u8>> {
+    if raster.len() != slope.pixels().len() {
+        bail!(
+            "tile raster has {} pixels, the slope image {}",
+            raster.len(),
+            slope.pixels().len()
+        );
+    }
     let all = tile_features(slope, cfg)?;
     let feats = &all.as_slice()[..all.len().min(max_features)];
     if grid.projection.len() > nav_core::tile::MAX_PROJECTION_LEN {
@@ -96,7 +128,6 @@ pub fn build_tile(
         reference_sigma_m,
         height_noise_m,
     };
-    let raster = slope.pixels();
     let mut buf = vec![0u8; tile_len_with_raster(MAX_HEADER_LEN, feats.len(), raster.len())];
     let len = write_tile_with_raster(&header, feats, Some(raster), &mut buf)
         .map_err(|e| anyhow::anyhow!("writing the tile: {e}"))?;
