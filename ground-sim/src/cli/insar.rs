@@ -41,11 +41,11 @@ pub struct Args {
     /// every suite scene, but tiles not yet better for TRN; docs/insar.md).
     #[arg(long, value_enum, default_value_t = InsarConfig::default().dem_filter)]
     pub dem_filter: DemFilterKind,
-    /// Detect the tile's features on the DEM with its small holes filled (`tile
-    /// --fill-holes`; the tile's slope raster keeps them missing). An explicit option
-    /// (docs/insar.md, "Holes in the tile").
+    /// Detect the tile's features on the DEM as it is, holes and all (the default fills the
+    /// small holes first, as `tile --fill-holes`; the tile's slope raster keeps them missing
+    /// either way; docs/insar.md, "Holes in the tile").
     #[arg(long)]
-    pub fill_tile_holes: bool,
+    pub keep_tile_holes: bool,
     /// σ of the DEM filter's Gaussian weights, output pixels (0 = no filter). Default: the
     /// kernel's (2 for `quadratic`, 1 for `gaussian`).
     #[arg(long)]
@@ -150,7 +150,7 @@ pub fn run_chain(a: &Args) -> anyhow::Result<Outcome> {
         min_coherence: a.min_coherence,
         unwrap: !a.no_unwrap,
         dem_filter: a.dem_filter,
-        fill_tile_holes: a.fill_tile_holes,
+        fill_tile_holes: !a.keep_tile_holes,
         dem_filter_sigma_px: a
             .dem_filter_sigma_px
             .unwrap_or_else(|| a.dem_filter.default_sigma_px()),

@@ -72,10 +72,10 @@ pub struct Args {
     /// quadratic fit at 2 px; docs/insar.md, "A filter without curvature bias").
     #[arg(long, value_enum, default_value_t = ground_sim::insar::InsarConfig::default().dem_filter)]
     pub dem_filter: ground_sim::insar::pipeline::DemFilterKind,
-    /// InSAR tiles' features detected on their DEM with small holes filled (`insar
-    /// --fill-tile-holes`). An explicit option (docs/insar.md, "Holes in the tile").
+    /// InSAR tiles' features detected on their DEM as it is, holes and all (`insar
+    /// --keep-tile-holes`; the default fills the small holes first).
     #[arg(long)]
-    pub fill_tile_holes: bool,
+    pub keep_tile_holes: bool,
     /// Spacing of the navigability map's rehearsal sites, metres (0: no rehearsal, the
     /// footprint rule only).
     #[arg(long, default_value_t = REHEARSAL_STEP_M)]
@@ -175,7 +175,7 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         looks: super::insar::looks_or_preset(a.looks, &a.radar),
         passes: a.passes,
         dem_filter: a.dem_filter,
-        fill_tile_holes: a.fill_tile_holes,
+        fill_tile_holes: !a.keep_tile_holes,
         navmap: NavmapThresholds::default(),
         rehearsal,
         budget: a.budget.budget,

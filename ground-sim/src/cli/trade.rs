@@ -217,7 +217,7 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
             looks,
             passes,
             dem_filter: Default::default(),
-            fill_tile_holes: false,
+            fill_tile_holes: ground_sim::insar::InsarConfig::default().fill_tile_holes,
             navmap: NavmapThresholds::default(),
             rehearsal: None,
             budget: a.budget.budget,

@@ -255,6 +255,23 @@ pub fn multilook_noise_correlation(
     }
 }
 
+/// Factor on a cell's height bound from the parallax of its error, ≥ 1:
+/// `max(1, √(1 + 2kρ + k²a²))` with `k = −s·cot θ` (`s` the ground's rise per metre away from
+/// the radar, `θ` the look angle), `ρ` the correlation of the cell's height noise with that of
+/// the mean height that placed it and `a²` that mean's variance over the cell's. Why: the chain
+/// places each height on the ground with a mean height, whose error moves it across the slope
+/// (`δy = δh̄·cot θ`), so the geocoded cell reads `δh − s·δy`. Facing the radar (`k < 0`) the
+/// formula falls below 1; no reduction is credited there, as foreshortening's own error, which
+/// the bound does not hold, is larger (docs/insar.md, "Holes in the tile").
+pub fn parallax_bound_factor(k: f64, rho: f64, a2: f64) -> f64 {
+    let v = 1.0 + 2.0 * k * rho + k * k * a2;
+    if v.is_finite() {
+        v.max(1.0).sqrt()
+    } else {
+        1.0
+    }
+}
+
 /// Cramér–Rao bound of the interferometric phase from `looks` independent looks at coherence
 /// `gamma`: `σ_φ = sqrt((1 − γ²)/(2·N·γ²))`, rad (Rodriguez & Martin 1992). Infinite at γ = 0.
 pub fn phase_crlb_rad(gamma: f64, looks: f64) -> f64 {
@@ -402,6 +419,20 @@ mod tests {
         assert!(multilook_noise_correlation(4, 4, 1.0, 1.0, 1.0) < 1e-3);
         // Half-overlapping windows of uncorrelated samples share half.
         assert!((multilook_noise_correlation(8, 4, 1.0, 1.0, 1.0) - 0.5).abs() < 1e-3);
+    }
+
+    #[test]
+    fn parallax_scales_bounds_on_slopes_facing_away_only() {
+        // The default window's correlations: 0.518 and 0.371 (docs/insar.md).
+        assert_eq!(parallax_bound_factor(0.0, 0.518, 0.371), 1.0);
+        // 33° facing away at 26°: k = tan 33° · cot 26° = 1.33.
+        let k = 33f64.to_radians().tan() / 26f64.to_radians().tan();
+        let away = parallax_bound_factor(k, 0.518, 0.371);
+        assert!((away - 1.74).abs() < 0.02, "{away}");
+        assert_eq!(parallax_bound_factor(-k, 0.518, 0.371), 1.0);
+        assert_eq!(parallax_bound_factor(f64::NAN, 0.518, 0.371), 1.0);
+        // Grows with the slope.
+        assert!(parallax_bound_factor(0.5, 0.518, 0.371) < away);
     }
 
     #[test]

@@ -20,7 +20,8 @@ use super::geocode::{
 };
 use super::geometry::{PairGeometry, wrap_rad};
 use super::looks::{
-    LookWindow, equivalent_looks_1d, multilook, passes_thermal_coherence, stacked_phase_crlb_rad,
+    LookWindow, equivalent_looks_1d, multilook, multilook_noise_correlation, parallax_bound_factor,
+    passes_thermal_coherence, stacked_phase_crlb_rad,
 };
 use super::unwrap::unwrap_quality_guided;
 use super::{InsarError, InsarResult};
@@ -66,8 +67,8 @@ pub struct InsarConfig {
     /// `docs/insar.md`).
     pub dem_filter_sigma_px: f64,
     /// Detect the reference tile's features on the DEM with its small holes filled
-    /// (`reference::holes`; the tile's slope raster keeps them). Off by default: docs/insar.md,
-    /// "Holes in the tile (session 39)".
+    /// (`reference::holes`; the tile's slope raster keeps them). On by default since the bound
+    /// carries the parallax term: docs/insar.md, "Holes in the tile (session 39)".
     pub fill_tile_holes: bool,
     /// Passes of the speckle-centroid correction ([`recentre_heights`]; 0 = none, the paper's
     /// processing). Not in the paper: see `docs/insar.md`.
@@ -103,7 +104,7 @@ impl Default for InsarConfig {
             geocode: GeocodeParams::default(),
             dem_filter: DemFilterKind::Gaussian,
             dem_filter_sigma_px: DemFilterKind::Gaussian.default_sigma_px(),
-            fill_tile_holes: false,
+            fill_tile_holes: true,
             recentre_passes: 2,
             range_oversampling: 2.0,
             azimuth_oversampling: 2.0,
@@ -778,6 +779,42 @@ pub fn process_stack(
         }
     }
 
+    // 6b. The parallax of a height error (session 39). The position above took the 3×3 mean
+    //     height, so its error δh̄ moves the point by δh̄·cot θ across the slope; on ground that
+    //     rises by s per metre away from the radar the cell then reads δh − s·cot θ·δh̄. With the
+    //     windows' noise correlation that scales the bound by √(1 + 2kρ + k²a²), k = −s·cot θ
+    //     (`looks::parallax_bound_factor`): 1.7× on a 33° slope facing away. Facing the radar
+    //     the formula falls below 1, but foreshortening's interpolation error there (not
+    //     modelled) is larger still, so no reduction is credited (docs/insar.md).
+    let (rho, a2) = parallax_correlations(w, cfg);
+    let span_flat_m = 2.0 * PARALLAX_SLOPE_RADIUS as f64 * ml_ground_m;
+    let zm = valid_mean(&z, &labels, lo, co, PARALLAX_SLOPE_RADIUS);
+    for k in 0..lo {
+        for m in PARALLAX_SLOPE_RADIUS..co.saturating_sub(PARALLAX_SLOPE_RADIUS) {
+            let i = k * co + m;
+            let (a, b) = (i - PARALLAX_SLOPE_RADIUS, i + PARALLAX_SLOPE_RADIUS);
+            let dy = gy[b] - gy[a];
+            // Ground facing away spreads over more samples, down to 0.19× the flat spacing at
+            // the shadow limit (cos s / sin(θ + s) at 26°); a span shorter than that is a
+            // clamped fold or noise, not a slope.
+            if labels[i] != label::VALID
+                || !(dy > PARALLAX_MIN_SPAN * span_flat_m)
+                || !(zm[a] - zm[b]).is_finite()
+            {
+                continue;
+            }
+            let s = (zm[b] - zm[a]) / dy;
+            let dz = g.a1_yz_m[1] - zm[i].clamp(zm[a].min(zm[b]), zm[a].max(zm[b]));
+            let r1 = g.range_m(w.centre(m));
+            let across = (r1 * r1 - dz * dz).max(0.0).sqrt();
+            if across > 0.0 {
+                // No ground seen faces away more steeply than the grazing ray (s = −cot θ).
+                let cot = dz / across;
+                sig[i] *= parallax_bound_factor((-s * cot).min(cot * cot), rho, a2);
+            }
+        }
+    }
+
     // 7. Geometric correction onto the grid, then eq 20 on the generated DEM.
     let coh64: Vec<f64> = coh.iter().map(|&c| f64::from(c)).collect();
     let radar = RadarPixels {
@@ -1116,6 +1153,50 @@ pub fn mirrored_dem(truth: &Dem) -> anyhow::Result<Dem> {
     mirrored.nodata = truth.nodata;
     mirrored.sample = truth.sample;
     Ok(mirrored)
+}
+
+/// Half-width, radar pixels, of the slope the parallax term reads (a 5-pixel span of 5×5 mean
+/// heights: its own noise stays a few hundredths on the floors).
+const PARALLAX_SLOPE_RADIUS: usize = 2;
+/// Shortest ground span of that slope, as a share of the flat ground's: 0.15, below the 0.19
+/// of ground facing away at the shadow limit (26° look angle), so only folds are refused.
+const PARALLAX_MIN_SPAN: f64 = 0.15;
+
+/// Noise correlations of a pixel's height with the 3×3 mean that places it
+/// (`ρ = cov(δh, δh̄)/σ²`) and of that mean with itself (`a² = var(δh̄)/σ²`), from the multilook
+/// windows' overlap (`looks::multilook_noise_correlation`) along both axes.
+fn parallax_correlations(w: LookWindow, cfg: &InsarConfig) -> (f64, f64) {
+    let axis = |os: f64| {
+        let c = |lag: f64| multilook_noise_correlation(w.size, w.step, lag, os, cfg.hamming_alpha);
+        let (r1, r2) = (c(1.0), c(2.0));
+        ((1.0 + 2.0 * r1) / 3.0, (3.0 + 4.0 * r1 + 2.0 * r2) / 9.0)
+    };
+    let (ra, aa) = axis(cfg.azimuth_oversampling);
+    let (rr, ar) = axis(cfg.range_oversampling);
+    (ra * rr, aa * ar)
+}
+
+/// Mean of the valid values within `radius` pixels (a square), NaN where none.
+fn valid_mean(z: &[f64], labels: &[u8], lines: usize, cols: usize, radius: usize) -> Vec<f64> {
+    let mut out = vec![f64::NAN; lines * cols];
+    for k in 0..lines {
+        for m in 0..cols {
+            let (mut acc, mut n) = (0.0, 0usize);
+            for kk in k.saturating_sub(radius)..(k + radius + 1).min(lines) {
+                for mm in m.saturating_sub(radius)..(m + radius + 1).min(cols) {
+                    let j = kk * cols + mm;
+                    if labels[j] == label::VALID && z[j].is_finite() {
+                        acc += z[j];
+                        n += 1;
+                    }
+                }
+            }
+            if n > 0 {
+                out[k * cols + m] = acc / n as f64;
+            }
+        }
+    }
+    out
 }
 
 /// Each row of a row-major `w`-wide raster reversed.
