@@ -43,7 +43,7 @@ pub struct Args {
     pub dem_filter: DemFilterKind,
     /// Detect the tile's features on the DEM as it is, holes and all (the default fills the
     /// small holes first, as `tile --fill-holes`; the tile's slope raster keeps them missing
-    /// either way; docs/insar.md, "Holes in the tile").
+    /// either way; docs/insar.md, "The parallax of the height error, and holes in the tile").
     #[arg(long)]
     pub keep_tile_holes: bool,
     /// σ of the DEM filter's Gaussian weights, output pixels (0 = no filter). Default: the

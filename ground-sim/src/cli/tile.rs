@@ -68,7 +68,7 @@ pub struct Args {
     /// edge) whose every cell lies within one `--smoothing-m` of valid heights, filled from
     /// their rims. The tile's slope raster keeps them missing. An explicit option: it gives
     /// more features on holed InSAR maps, and noisy stretches of map their noise's blobs
-    /// (docs/insar.md, "Holes in the tile").
+    /// (docs/insar.md, "The parallax of the height error, and holes in the tile").
     #[arg(long)]
     pub fill_holes: bool,
     /// Measure the tile's frame-wide error by flying this many simulated frames over the

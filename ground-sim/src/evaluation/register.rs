@@ -284,6 +284,7 @@ pub fn register(
         0.0,
         [0.0; 2],
         0.0,
+        None,
     )?;
     let tile = Tile::parse(&tile_bytes).map_err(|e| anyhow!("tile: {e}"))?;
     let tile_build_ms = t0.elapsed().as_secs_f64() * 1e3;

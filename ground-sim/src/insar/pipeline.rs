@@ -68,7 +68,7 @@ pub struct InsarConfig {
     pub dem_filter_sigma_px: f64,
     /// Detect the reference tile's features on the DEM with its small holes filled
     /// (`reference::holes`; the tile's slope raster keeps them). On by default since the bound
-    /// carries the parallax term: docs/insar.md, "Holes in the tile (session 39)".
+    /// carries the parallax term: docs/insar.md, "The parallax of the height error, and holes in the tile".
     pub fill_tile_holes: bool,
     /// Passes of the speckle-centroid correction ([`recentre_heights`]; 0 = none, the paper's
     /// processing). Not in the paper: see `docs/insar.md`.
@@ -787,31 +787,31 @@ pub fn process_stack(
     //     the formula falls below 1, but foreshortening's interpolation error there (not
     //     modelled) is larger still, so no reduction is credited (docs/insar.md).
     let (rho, a2) = parallax_correlations(w, cfg);
-    let span_flat_m = 2.0 * PARALLAX_SLOPE_RADIUS as f64 * ml_ground_m;
+    // Slant range the slope's span covers, metres.
+    let span_slant_m = 2.0 * PARALLAX_SLOPE_RADIUS as f64 * g.range_spacing_m * w.step as f64;
     let zm = valid_mean(&z, &labels, lo, co, PARALLAX_SLOPE_RADIUS);
     for k in 0..lo {
         for m in PARALLAX_SLOPE_RADIUS..co.saturating_sub(PARALLAX_SLOPE_RADIUS) {
             let i = k * co + m;
             let (a, b) = (i - PARALLAX_SLOPE_RADIUS, i + PARALLAX_SLOPE_RADIUS);
-            let dy = gy[b] - gy[a];
-            // Ground facing away spreads over more samples, down to 0.19× the flat spacing at
-            // the shadow limit (cos s / sin(θ + s) at 26°); a span shorter than that is a
-            // clamped fold or noise, not a slope.
-            if labels[i] != label::VALID
-                || !(dy > PARALLAX_MIN_SPAN * span_flat_m)
-                || !(zm[a] - zm[b]).is_finite()
-            {
+            if labels[i] != label::VALID || !(zm[a] - zm[b]).is_finite() {
                 continue;
             }
-            let s = (zm[b] - zm[a]) / dy;
             let dz = g.a1_yz_m[1] - zm[i].clamp(zm[a].min(zm[b]), zm[a].max(zm[b]));
             let r1 = g.range_m(w.centre(m));
             let across = (r1 * r1 - dz * dz).max(0.0).sqrt();
-            if across > 0.0 {
-                // No ground seen faces away more steeply than the grazing ray (s = −cot θ).
-                let cot = dz / across;
-                sig[i] *= parallax_bound_factor((-s * cot).min(cot * cot), rho, a2);
+            let dy = gy[b] - gy[a];
+            // Ground facing away spreads over more samples: a slant span δr covers
+            // δr·cos s / sin(θ + s) of ground, at least δr·sin θ (at the shadow limit). A span
+            // shorter than a share of that is a clamped fold or noise, not a slope.
+            let sin_theta = across / r1.max(f64::MIN_POSITIVE);
+            if !(across > 0.0 && dy > PARALLAX_MIN_SPAN * span_slant_m * sin_theta) {
+                continue;
             }
+            let s = (zm[b] - zm[a]) / dy;
+            // No ground seen faces away more steeply than the grazing ray (s = −cot θ).
+            let cot = dz / across;
+            sig[i] *= parallax_bound_factor((-s * cot).min(cot * cot), rho, a2);
         }
     }
 
@@ -1158,9 +1158,10 @@ pub fn mirrored_dem(truth: &Dem) -> anyhow::Result<Dem> {
 /// Half-width, radar pixels, of the slope the parallax term reads (a 5-pixel span of 5×5 mean
 /// heights: its own noise stays a few hundredths on the floors).
 const PARALLAX_SLOPE_RADIUS: usize = 2;
-/// Shortest ground span of that slope, as a share of the flat ground's: 0.15, below the 0.19
-/// of ground facing away at the shadow limit (26° look angle), so only folds are refused.
-const PARALLAX_MIN_SPAN: f64 = 0.15;
+/// Shortest ground span of that slope, as a share of the span of ground facing away at the
+/// shadow limit (slant span × sin θ, the least any ground the radar sees can have): shorter
+/// spans are clamped folds, which get no parallax factor.
+const PARALLAX_MIN_SPAN: f64 = 0.75;
 
 /// Noise correlations of a pixel's height with the 3×3 mean that places it
 /// (`ρ = cov(δh, δh̄)/σ²`) and of that mean with itself (`a² = var(δh̄)/σ²`), from the multilook

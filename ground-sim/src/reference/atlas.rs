@@ -154,6 +154,7 @@ pub fn build_atlas(
                 h.smoothing_m as f64,
                 h.reference_sigma_m,
                 h.height_noise_m,
+                None,
             )
         })
         .collect::<Result<_>>()?;

@@ -14,7 +14,7 @@ use serde::Serialize;
 use crate::dem::{
     Dem, GeoRef, GeoTransform, Interpolation, read_geotiff, resample_to_pixel, write_geotiff,
 };
-use crate::reference::tile::{GeoGrid, build_tile_over};
+use crate::reference::tile::{GeoGrid, build_tile};
 
 pub mod atlas;
 pub mod holes;
@@ -242,7 +242,9 @@ pub struct Smoothing {
     pub height_noise_m: f64,
     /// Detect the tile's features on the DEM with its small holes filled (every cell within
     /// `target_m` of valid heights, [`holes::fill_small_holes`]); the tile's slope raster keeps
-    /// them missing. Off by default (docs/insar.md, "Holes in the tile", session 39).
+    /// them missing. Off in [`Smoothing::default_for_truth`]; InSAR products take it from
+    /// `InsarConfig::fill_tile_holes` (on). docs/insar.md, "The parallax of the height error,
+    /// and holes in the tile".
     pub fill_holes: bool,
 }
 
@@ -348,9 +350,9 @@ pub fn write_reference_with(
     let (filled, hole_fill) = holes::fill_small_holes(ref_dem, fill_radius_m)?;
     let px = reference_slope_px(ref_dem, smoothing.applied_m())?;
     let px_filled = if hole_fill.filled_cells > 0 {
-        reference_slope_px(&filled, smoothing.applied_m())?
+        Some(reference_slope_px(&filled, smoothing.applied_m())?)
     } else {
-        px.clone()
+        None
     };
     let slope = Dem::new(
         ref_dem.width(),
@@ -361,8 +363,13 @@ pub fn write_reference_with(
         ref_dem.geo.clone(),
     )?;
     let pixel_m = ref_dem.pixel_m()?;
-    let img = SlopeImage::new_checked(&px_filled, slope.width(), slope.height(), pixel_m as f32)
-        .map_err(|e| anyhow::anyhow!("reference slope: {e}"))?;
+    let img = SlopeImage::new_checked(
+        px_filled.as_deref().unwrap_or(&px),
+        slope.width(),
+        slope.height(),
+        pixel_m as f32,
+    )
+    .map_err(|e| anyhow::anyhow!("reference slope: {e}"))?;
     let t = ref_dem.geo.transform.0;
     let grid = GeoGrid {
         origin_x_m: t[0] + 0.5 * t[1],
@@ -381,7 +388,7 @@ pub fn write_reference_with(
     };
     let ref_sigma = reference_sigma_m(smoothing.inherent_m, smoothing.one_look_share)
         .map(|b| (b as f64).hypot(frame_wide_m) as f32);
-    let bytes = build_tile_over(
+    let bytes = build_tile(
         &img,
         &grid,
         cfg,
@@ -389,7 +396,7 @@ pub fn write_reference_with(
         smoothing.target_m,
         ref_sigma,
         noise as f32,
-        &px,
+        px_filled.is_some().then_some(px.as_slice()),
     )?;
     let features = Tile::parse(&bytes)
         .map(|t| t.len())

@@ -60,7 +60,10 @@ pub fn tile_features(
 /// `reference_sigma_m` is the map's own horizontal error the tile claims (x, y; metres; see
 /// `nav_core::TileHeader::reference_sigma_m` and [`super::reference_sigma_m`]);
 /// `height_noise_m` the map's own height noise, 1σ per pixel, metres (0 = none claimed; see
-/// `nav_core::TileHeader::height_noise_m`).
+/// `nav_core::TileHeader::height_noise_m`). `raster` (same size as `slope`), when given, is the
+/// tile's slope raster in place of `slope`'s own pixels (features from a hole-filled slope, the
+/// raster with its holes: `super::write_reference_with`).
+#[allow(clippy::too_many_arguments)]
 pub fn build_tile(
     slope: &SlopeImage<'_>,
     grid: &GeoGrid,
@@ -69,32 +72,9 @@ pub fn build_tile(
     smoothing_m: f64,
     reference_sigma_m: [f32; 2],
     height_noise_m: f32,
+    raster: Option<&[nav_core::SlopePx]>,
 ) -> Result<Vec<u8>> {
-    build_tile_over(
-        slope,
-        grid,
-        cfg,
-        max_features,
-        smoothing_m,
-        reference_sigma_m,
-        height_noise_m,
-        slope.pixels(),
-    )
-}
-
-/// [`build_tile`] with features from `slope` and `raster` (same size) as the tile's slope
-/// raster in place of `slope`'s own pixels.
-#[allow(clippy::too_many_arguments)]
-pub fn build_tile_over(
-    slope: &SlopeImage<'_>,
-    grid: &GeoGrid,
-    cfg: &SurfConfig,
-    max_features: usize,
-    smoothing_m: f64,
-    reference_sigma_m: [f32; 2],
-    height_noise_m: f32,
-    raster: &[nav_core::SlopePx],
-) -> Result<Vec<u8>> {
+    let raster = raster.unwrap_or(slope.pixels());
     if raster.len() != slope.pixels().len() {
         bail!(
             "tile raster has {} pixels, the slope image {}",
