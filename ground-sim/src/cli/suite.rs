@@ -83,6 +83,11 @@ pub struct Args {
     /// Rehearsal frames per site.
     #[arg(long, default_value_t = REHEARSAL_FRAMES)]
     pub rehearsal_frames: usize,
+    /// Simulation-only diagnostic: rehearse from the scene's true terrain instead of a draw
+    /// from the map and its error (separates what the map's error model misses from the go
+    /// rule's own limit; docs/navmap.md). Recorded in suite.json's spec.
+    #[arg(long)]
+    pub rehearse_on_truth: bool,
     /// The navigator budget.
     #[command(flatten)]
     pub budget: super::BudgetArgs,
@@ -148,6 +153,9 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         })
         .map(|r| r.validate().map(|()| r))
         .transpose()?;
+    if a.rehearse_on_truth && rehearsal.is_none() {
+        bail!("--rehearse-on-truth needs the rehearsal (a --rehearsal-step-m other than 0)");
+    }
     let mut priors = vec![None];
     if a.prior_sigma_m > 0.0 {
         priors.push(Some(PriorSpec {
@@ -178,6 +186,7 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         fill_tile_holes: !a.keep_tile_holes,
         navmap: NavmapThresholds::default(),
         rehearsal,
+        rehearse_on_truth: a.rehearse_on_truth,
         budget: a.budget.budget,
     };
     let n_campaigns = scenes.len() * spec.kinds.len() * spec.priors.len();

@@ -220,6 +220,7 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
             fill_tile_holes: ground_sim::insar::InsarConfig::default().fill_tile_holes,
             navmap: NavmapThresholds::default(),
             rehearsal: None,
+            rehearse_on_truth: false,
             budget: a.budget.budget,
         };
         let tag = format!(

@@ -202,6 +202,11 @@ pub struct SuiteSpec {
     pub navmap: NavmapThresholds,
     /// The navigability map by rehearsal, per campaign's prior mode (`None`: not flown).
     pub rehearsal: Option<RehearsalSpec>,
+    /// A simulation-only diagnostic: the rehearsal flies its frames from the scene's true
+    /// terrain (at the scene's own 5 m pixel) instead of a draw from the map and its reported
+    /// error. What it gains over the normal rehearsal is what the map's error model misses;
+    /// what it still gets wrong is the go rule's own limit (docs/navmap.md). No flyer has this.
+    pub rehearse_on_truth: bool,
     /// Navigator budget (flight unless asked otherwise).
     pub budget: Budget,
 }
@@ -383,6 +388,10 @@ pub fn run_scene(
         let rehearsal_input = spec
             .rehearsal
             .map(|r| -> anyhow::Result<_> {
+                if spec.rehearse_on_truth {
+                    // The truth claims no error: its DEM is flown as it is.
+                    return Ok((r, dem.clone(), ErrorModel::none()));
+                }
                 Ok((
                     r,
                     read_geotiff(&tdir.join(crate::reference::DEM_FILE))?,
@@ -690,6 +699,11 @@ pub fn table_markdown(r: &SuiteReport) -> String {
             k => format!(", DEM filter {k:?} at {} px", k.default_sigma_px()).to_lowercase(),
         },
     );
+    if r.spec.rehearse_on_truth {
+        s += "**Diagnostic run: the rehearsal flew frames from the scenes' true terrain** \
+              (`--rehearse-on-truth`), not from the maps; its column is not a prediction a \
+              flyer could have.\n\n";
+    }
     s += concat!(
         "| scene | tile | prior | success | false | no fix (reasons) | pos p50 / p95 m | heading p95 ° | in 3σ | NEES | ms/frame | M4 work p95 (frames over 20 M / budget cut) | navmap (footprint) go: success / agree | navmap (rehearsal) go: success / agree |\n",
         "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
