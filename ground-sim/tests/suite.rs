@@ -346,7 +346,10 @@ fn suite_and_navmap_refuse_bad_input_clearly() {
     ]);
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(err.contains("--rehearse-on-truth needs the rehearsal"), "{err}");
+    assert!(
+        err.contains("--rehearse-on-truth needs the rehearsal"),
+        "{err}"
+    );
     let dir = tempfile::tempdir().unwrap();
     let out = ground_sim(&[
         "navmap",
@@ -397,18 +400,6 @@ fn trade_refuses_bad_input_clearly() {
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("no scene named \"nowhere\""), "{err}");
-    let out = ground_sim(&[
-        "suite",
-        "--quick",
-        "--rehearsal-step-m",
-        "0",
-        "--rehearse-on-truth",
-        "--out",
-        "/tmp/x",
-    ]);
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(err.contains("--rehearse-on-truth needs the rehearsal"), "{err}");
     let out = ground_sim(&["trade", "--baseline-m", "0", "--out", path(dir.path())]);
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("--baseline-m positive"));
