@@ -48,7 +48,7 @@ fn bench_navigator(c: &mut Criterion) {
         detector,
         upright: false,
     };
-    let tile_bytes = build_tile(&img, &grid, &cfg, 512, smoothing_m, [0.0; 2], 0.0)
+    let tile_bytes = build_tile(&img, &grid, &cfg, 512, smoothing_m, [0.0; 2], 0.0, None)
         .unwrap_or_else(|e| panic!("{e}"));
     let tile = Tile::parse(&tile_bytes).unwrap_or_else(|e| panic!("{e}"));
     // A 256-keypoint host workspace: without the flyer's per-frame work budget, which its

@@ -72,6 +72,7 @@ fn reference() -> (Vec<nav_core::SlopePx>, Vec<u8>) {
         0.0,
         [0.0; 2],
         0.0,
+        None,
     )
     .unwrap();
     (slope, tile)

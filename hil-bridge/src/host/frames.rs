@@ -494,6 +494,7 @@ pub fn generate_set_on(terrain: SetTerrain, terrain_frames: usize) -> Result<Fra
         smoothing_m,
         ground_sim::reference::reference_sigma_m(0.0, 1.0),
         0.0,
+        None,
     )
     .context("reference tile")?;
 
