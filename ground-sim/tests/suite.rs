@@ -335,6 +335,7 @@ fn suite_and_navmap_refuse_bad_input_clearly() {
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("no scene named \"nowhere\""), "{err}");
+    let scratch = tempfile::tempdir().unwrap();
     let out = ground_sim(&[
         "suite",
         "--quick",
@@ -342,7 +343,7 @@ fn suite_and_navmap_refuse_bad_input_clearly() {
         "0",
         "--rehearse-on-truth",
         "--out",
-        "/tmp/x",
+        path(scratch.path()),
     ]);
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);

@@ -205,7 +205,8 @@ pub struct SuiteSpec {
     /// A simulation-only diagnostic: the rehearsal flies its frames from the scene's true
     /// terrain (at the scene's own 5 m pixel) instead of a draw from the map and its reported
     /// error. What it gains over the normal rehearsal is what the map's error model misses;
-    /// what it still gets wrong is the go rule's own limit (docs/navmap.md). No flyer has this.
+    /// what it still gets wrong is the go rule's own limit (docs/navmap.md). No flyer has this;
+    /// its files are named `rehearsal-on-truth-*` and suite.md says so above the table.
     pub rehearse_on_truth: bool,
     /// Navigator budget (flight unless asked otherwise).
     pub budget: Budget,
@@ -440,7 +441,12 @@ pub fn run_scene(
                         &reh,
                         &tile,
                         reference.slope.as_ref(),
-                        &dir.join(format!("rehearsal-{tag}")),
+                        // A diagnostic rehearsal's files say so in their names.
+                        &dir.join(if spec.rehearse_on_truth {
+                            format!("rehearsal-on-truth-{tag}")
+                        } else {
+                            format!("rehearsal-{tag}")
+                        }),
                     )?;
                     Some(reh)
                 }

@@ -803,7 +803,8 @@ fn the_bound_holds_the_parallax_on_ground_facing_away() {
         a.height_rmse_m, a.crlb_height_m, a.valid_fraction
     );
     assert!(a.valid_fraction > 0.9, "valid {}", a.valid_fraction);
-    assert!((0.75..1.2).contains(&ratio), "error over bound {ratio:.2}");
+    // Narrow enough that a factor applied to only part of the slope (≈ 1.15) fails too.
+    assert!((0.85..1.12).contains(&ratio), "error over bound {ratio:.2}");
 }
 
 /// Four passes of one track: the receiver noise's share of the height error halves, and so
