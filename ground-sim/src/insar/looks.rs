@@ -262,7 +262,8 @@ pub fn multilook_noise_correlation(
 /// places each height on the ground with a mean height, whose error moves it across the slope
 /// (`δy = δh̄·cot θ`), so the geocoded cell reads `δh − s·δy`. Facing the radar (`k < 0`) the
 /// formula falls below 1; no reduction is credited there, as foreshortening's own error, which
-/// the bound does not hold, is larger (docs/insar.md, "The parallax of the height error, and holes in the tile").
+/// the bound does not hold, is larger (docs/insar.md, "The parallax of the height error, and
+/// holes in the tile").
 pub fn parallax_bound_factor(k: f64, rho: f64, a2: f64) -> f64 {
     let v = 1.0 + 2.0 * k * rho + k * k * a2;
     if v.is_finite() {

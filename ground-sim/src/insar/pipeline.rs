@@ -68,7 +68,8 @@ pub struct InsarConfig {
     pub dem_filter_sigma_px: f64,
     /// Detect the reference tile's features on the DEM with its small holes filled
     /// (`reference::holes`; the tile's slope raster keeps them). On by default since the bound
-    /// carries the parallax term: docs/insar.md, "The parallax of the height error, and holes in the tile".
+    /// carries the parallax term: docs/insar.md, "The parallax of the height error, and holes
+    /// in the tile".
     pub fill_tile_holes: bool,
     /// Passes of the speckle-centroid correction ([`recentre_heights`]; 0 = none, the paper's
     /// processing). Not in the paper: see `docs/insar.md`.

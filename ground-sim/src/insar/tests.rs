@@ -785,8 +785,8 @@ fn a_coarse_prior_dem_picks_the_cycles_the_datum_rule_gets_wrong() {
 /// away from the radar (one look, NESZ −22 dB, so the noise dominates on the darkened slope;
 /// 500 m, so the relief stays within one 2π cycle) the chain's error is √(1 + 2kρ + k²a²) ≈
 /// 1.30 times the phase's bound, k = tan 15° · cot 26°. The bound carries the factor, so the
-/// error over it reads near 1 (measured 1.01, valid 95 %); without the factor it would read
-/// about 1.3. At −15 dB the slope is too dark to unwrap (valid 30 %).
+/// error over it reads near 1 (measured 1.01, valid 95 %); without the factor the formula puts
+/// it near 1.3, outside the band. At −15 dB the slope is too dark to unwrap (valid 30 %).
 #[test]
 fn the_bound_holds_the_parallax_on_ground_facing_away() {
     let t = 15f64.to_radians().tan();
@@ -803,7 +803,7 @@ fn the_bound_holds_the_parallax_on_ground_facing_away() {
         a.height_rmse_m, a.crlb_height_m, a.valid_fraction
     );
     assert!(a.valid_fraction > 0.9, "valid {}", a.valid_fraction);
-    // Narrow enough that a factor applied to only part of the slope (≈ 1.15) fails too.
+    // Narrow, so a factor applied to only part of the slope fails it too.
     assert!((0.85..1.12).contains(&ratio), "error over bound {ratio:.2}");
 }
 
