@@ -4,6 +4,7 @@
 //! set's own terrain, tile (50 m smoothing) and frames.
 
 use hil_bridge::convert::prior;
+use hil_bridge::flight;
 use hil_bridge::host::frames::{FRAME_PIXEL_M, generate_set};
 use hil_bridge::host::runner::Workspace;
 use nav_core::{DemPatch, NavConfig, Navigator, Tile};
@@ -37,7 +38,7 @@ fn the_search_goes_first_with_a_prior_and_the_features_follow_when_it_fails() {
             ..NavConfig::default()
         },
     );
-    // A noisy frame (8 m of correlated height noise): 16 keypoints whose matches agree on
+    // A noisy frame (8 m of correlated height noise): a keypoint budget whose matches agree on
     // nothing, a slope the search still reads.
     let f = frame("noisy-02");
     let dem = DemPatch::new_checked(&f.heights_m, 200, 200, FRAME_PIXEL_M).unwrap();
@@ -46,14 +47,17 @@ fn the_search_goes_first_with_a_prior_and_the_features_follow_when_it_fails() {
     assert!(!a.detected && a.features == 0, "{a:?}");
     let fix_a = a.outcome.expect("a search fix");
     assert!(fix_a.area_search);
-    // Features first under the flight work budget: after 16 keypoints no room is left for
-    // the search, and the frame says so instead of overrunning.
+    // Features first under the flight work budget: after a whole keypoint budget no room is
+    // left for the search, and the frame says so instead of overrunning.
     let bf = after_flight.locate_dem(&mut ws, &dem, Some(&p)).unwrap();
     assert!(bf.over_budget && bf.outcome.is_err(), "{bf:?}");
     assert_eq!(bf.search, Some(Err(nav_core::SearchError::OverBudget)));
     assert!(bf.work <= after_flight.config().work_budget, "{}", bf.work);
     let b = after.locate_dem(&mut ws, &dem, Some(&p)).unwrap();
-    assert!(b.detected && b.features == 16, "{b:?}");
+    assert!(
+        b.detected && b.features as usize == flight::MAX_KEYPOINTS,
+        "{b:?}"
+    );
     let fix_b = b.outcome.expect("a search fix after the feature path");
     assert!(fix_b.area_search);
     // The same hit and the same refinement: the same fix, whatever ran before it.

@@ -31,10 +31,12 @@
 /// measured count of every frame).
 pub const FLIGHT_BUDGET: u32 = 20_000_000;
 /// Slope, terrain smoothing and detection, per binned frame pixel, for a frame with relief
-/// (10.97 M measured for a featureless 100 × 100 binned frame; the responses above the
-/// threshold add ≈ 20 instructions each, 0.1 M on the steep fresh crater's 4 900, which this
-/// figure's margin holds).
-pub const PER_BINNED_PX: u32 = 1_220;
+/// (8.41 M measured for a featureless 100 × 100 binned frame since session 41, when each
+/// octave's first and last layer became lazy, [`crate::detector`]: 2.32–2.67 M less on every
+/// HIL frame that detects, 10.97 M before; the responses above the threshold and the lazy
+/// layers' responses their candidates need add up to 0.13 M on the steep fresh crater's
+/// frames, which this figure's margin holds).
+pub const PER_BINNED_PX: u32 = 955;
 /// Binning, terrain smoothing and slope alone, per binned frame pixel (a frame the area search
 /// fixed before any detection: 5.35 M for 100 × 100).
 pub const SLOPE_PER_BINNED_PX: u32 = 560;
@@ -112,7 +114,7 @@ pub const fn fixed_first_stage(binned_px: usize, nodata_sums: u32) -> u32 {
 }
 
 /// Work of the feature path's first stage after the slope: detection and `max_keypoints`
-/// keypoints (9.5 M for a 100 × 100 binned frame and 16 keypoints); it runs only if it fits
+/// keypoints (8.3 M for a 100 × 100 binned frame and 24 keypoints); it runs only if it fits
 /// after the slope.
 pub const fn detection_stage(binned_px: usize, max_keypoints: usize) -> u32 {
     detection(binned_px).saturating_add(keypoints(max_keypoints))
@@ -183,11 +185,12 @@ mod tests {
 
     #[test]
     fn flight_frames_fixed_stage_fits_the_budget() {
-        // A 200 × 200 frame binned by 2: slope 5.6 M with a prior, 15.1 M lost in space.
+        // A 200 × 200 frame binned by 2: slope 5.6 M with a prior; lost in space, detection
+        // and 24 keypoints 13.9 M more.
         assert_eq!(fixed_first_stage(100 * 100, 0), 5_600_000);
         assert_eq!(
-            fixed_first_stage(100 * 100, 0) + detection_stage(100 * 100, 16),
-            15_080_000
+            fixed_first_stage(100 * 100, 0) + detection_stage(100 * 100, 24),
+            13_870_000
         );
         // The HIL's frames with holes (13 % no data): 1 604 column sums, 1.17 M more; at most
         // one per binned pixel: the slope alone stays well inside the flight budget.

@@ -417,7 +417,16 @@ pub(crate) fn detect(
         }
         let needed =
             |layer: usize| live(layer) || live(layer + 1) || (layer > 0 && live(layer - 1));
+        // A layer read only as a live layer's neighbour ("lazy": the octave's first and last,
+        // with the default four layers) is not swept row by row: a response of it is computed
+        // when a candidate that is already the largest of its own layer's 3 × 3 and of its
+        // other, swept neighbour layer needs it, and kept in the ring for the next candidate.
+        // Most candidates fail before, so half the octave's responses are never computed; the
+        // ones that are get exactly the value the sweep would have given (same keypoints).
+        let lazy = |layer: usize| needed(layer) && !live(layer);
         let step = sample_step(octave);
+        let kernels: [Kernel; MAX_LAYERS] =
+            core::array::from_fn(|layer| Kernel::new(filter_side(octave, layer), w));
         let (gw, gh) = (w.div_ceil(step), h.div_ceil(step));
         let idx =
             |layer: usize, gy: usize, gx: usize| (layer * RING_ROWS + gy % RING_ROWS) * gw + gx;
@@ -429,11 +438,17 @@ pub(crate) fn detect(
                 }
                 let side = filter_side(octave, layer);
                 let half = (side - 1) / 2;
-                let kernel = Kernel::new(side, w);
+                let Some(kernel) = kernels.get(layer) else {
+                    continue;
+                };
                 let row_start = idx(layer, gy, 0);
                 let Some(row) = ring.get_mut(row_start..row_start + gw) else {
                     continue;
                 };
+                if lazy(layer) {
+                    row.fill(NOT_YET);
+                    continue;
+                }
                 let rows_inside = y >= half && y + half < h;
                 // Grid columns whose filter lies inside the image: x ≥ half, x + half < w.
                 let gx_lo = half.div_ceil(step).min(gw);
@@ -480,9 +495,6 @@ pub(crate) fn detect(
                 continue;
             }
             let cy = gy - 1;
-            let at = |layer: usize, gy: usize, gx: usize| {
-                ring.get(idx(layer, gy, gx)).copied().unwrap_or(0.0)
-            };
             let row_start = |layer: usize, gy: usize| idx(layer, gy, 0);
             for layer in 1..layers - 1 {
                 if !live(layer) {
@@ -496,20 +508,32 @@ pub(crate) fn detect(
                 }
                 // The 3 × 3 × 3 neighbourhood's nine ring rows, found once per centre row (the
                 // same layer's first: a candidate that is no maximum most often has a larger
-                // neighbour there).
-                let rows = [layer, layer - 1, layer + 1]
-                    .map(|l| [cy - 1, cy, cy + 1].map(|yy| row_start(l, yy)));
+                // neighbour there; a lazy layer's last, its responses being dear).
+                let order = if lazy(layer - 1) {
+                    [layer, layer + 1, layer - 1]
+                } else {
+                    [layer, layer - 1, layer + 1]
+                };
+                let rows = order.map(|l| [cy - 1, cy, cy + 1].map(|yy| row_start(l, yy)));
                 for gx in 1..gw.saturating_sub(1) {
                     let x = gx * step;
                     if x < reach || x + reach >= w {
                         continue;
                     }
-                    let v = at(layer, cy, gx);
+                    let v = ring.get(idx(layer, cy, gx)).copied().unwrap_or(0.0);
                     if v.is_nan() || v <= cfg.threshold {
                         continue;
                     }
                     stats.candidates = stats.candidates.saturating_add(1);
-                    if !strict_max(ring, &rows, gx, v) {
+                    let fill = |li: usize, yi: usize, xx: usize| {
+                        let l = order.get(li).copied().unwrap_or(layer);
+                        let side = filter_side(octave, l);
+                        let at = (xx * step, (cy + yi - 1) * step);
+                        kernels
+                            .get(l)
+                            .map_or(0.0, |k| on_demand(ii, k, (w, h), side, at))
+                    };
+                    if !strict_max(ring, &rows, gx, v, fill) {
                         continue;
                     }
                     stats.maxima += 1;
@@ -521,6 +545,9 @@ pub(crate) fn detect(
                         stats.rejected_nodata += 1;
                         continue;
                     }
+                    let at = |layer: usize, gy: usize, gx: usize| {
+                        ring.get(idx(layer, gy, gx)).copied().unwrap_or(0.0)
+                    };
                     match refine(&at, ii, octave, layer, cy, gx) {
                         Some(kp) if kp.scale_px >= cfg.min_scale_px => sink(kp),
                         Some(_) => stats.rejected_scale += 1,
@@ -533,24 +560,66 @@ pub(crate) fn detect(
     Ok(stats)
 }
 
+/// Ring entry of a lazy layer whose response has not been computed yet (no response is −∞: box
+/// sums are finite).
+const NOT_YET: f32 = f32::NEG_INFINITY;
+
 /// Whether `v`, the response at column `gx` of the middle row of `rows[0]`, is larger than all
 /// 26 neighbours: `rows` holds the ring offsets of the rows above, at and below the centre, for
-/// the centre's layer, the one below and the one above. A response outside the ring reads 0.
+/// the centre's layer and its two neighbour layers. A response outside the ring reads 0; one not
+/// computed yet ([`NOT_YET`]) is `fill(layer index in rows, row index, column)`, stored in the
+/// ring for the next candidate.
 #[inline]
-fn strict_max(ring: &[f32], rows: &[[usize; 3]; 3], gx: usize, v: f32) -> bool {
+fn strict_max(
+    ring: &mut [f32],
+    rows: &[[usize; 3]; 3],
+    gx: usize,
+    v: f32,
+    mut fill: impl FnMut(usize, usize, usize) -> f32,
+) -> bool {
     for (li, layer_rows) in rows.iter().enumerate() {
         for (yi, &start) in layer_rows.iter().enumerate() {
             for xx in gx - 1..=gx + 1 {
                 if (li, yi, xx) == (0, 1, gx) {
                     continue;
                 }
-                if ring.get(start + xx).copied().unwrap_or(0.0) >= v {
+                let r = match ring.get_mut(start + xx) {
+                    Some(slot) if *slot == NOT_YET => {
+                        *slot = fill(li, yi, xx);
+                        *slot
+                    }
+                    Some(slot) => *slot,
+                    None => 0.0,
+                };
+                if r >= v {
                     return false;
                 }
             }
         }
     }
     true
+}
+
+/// Response of a filter of `side` pixels (`kernel` its offsets) at pixel `(x, y)` of a `w × h`
+/// image, exactly as the row sweep of [`detect`] computes it: 0 where the filter leaves the
+/// image, [`hessian`] where it touches the image's first row or column, [`Kernel::response`]
+/// elsewhere.
+#[inline(never)]
+fn on_demand(
+    ii: &Integral<'_>,
+    kernel: &Kernel,
+    (w, h): (usize, usize),
+    side: usize,
+    (x, y): (usize, usize),
+) -> f32 {
+    let half = (side - 1) / 2;
+    if x < half || y < half || x + half >= w || y + half >= h {
+        return 0.0;
+    }
+    if x == half || y == half {
+        return hessian(ii, x as isize, y as isize, side as isize).0;
+    }
+    kernel.response(ii.data(), y * w + x)
 }
 
 /// Side of the blocks of [`NodataMap`], pixels.

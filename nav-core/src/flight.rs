@@ -13,12 +13,14 @@ pub const MAX_FRAME_PX: usize = MAX_FRAME_WIDTH * 200;
 /// `features_dropped`.
 ///
 /// **A trade-off for the instruction budget** (see `docs/bounds.md`, firmware section): each kept
-/// keypoint costs ≈ 0.13 M instructions to describe and ≈ 0.08 M to match against the
-/// 457-feature tile, on top of ≈ 11–17 M per frame for slope and detection. Measured worst case
-/// over the recorded set: 19.05 M at 16, 19.85 M at 20, 21.1 M at 24, 22.6 M at 32, 67.6 M at 256
-/// keypoints. Its cost on the ground's terrain suite against 256 keypoints is in
-/// docs/results.md (e.g. the Shoemaker floor against its InSAR tile, 300 frames: 98.7 % → 60.3 %).
-pub const MAX_KEYPOINTS: usize = 16;
+/// keypoint costs ≈ 0.13 M instructions to describe and ≈ 0.05 M to match against a 300-feature
+/// tile, on top of ≈ 9.5 M per frame for slope and detection (≈ 12 M until session 41, when the
+/// detector's lazy layers took 2.3–2.7 M off every frame that detects). 24 since session 41
+/// (16 before): on the terrain suite's InSAR tiles without a prior (seeds 1 and 2, 5 400
+/// frames), 24 keypoints fix 3 637 frames, 16 fixed 3 482 with lazy layers (3 454 before them)
+/// and 32 fix 3 478 (the 20 M budget then cuts their refinements); no false fix in any
+/// (docs/registration.md, "Lazy layers, 24 keypoints").
+pub const MAX_KEYPOINTS: usize = 24;
 /// Putative-match budget per frame.
 pub const MAX_MATCHES: usize = 128;
 

@@ -21,7 +21,8 @@
 //! [`crate::navigator::Prior::heading_rad`] on a north-up tile).
 //!
 //! Memory: a [`Keyframe`] holds one tile blob of [`keyframe_bytes`] bytes (for the flight
-//! budget, 200 × 200 px frames and 16 keypoints: see `docs/bounds.md`). No allocation, no
+//! budget, 200 × 200 px frames and [`crate::flight::MAX_KEYPOINTS`] keypoints: see
+//! `docs/bounds.md`). No allocation, no
 //! panic, bounded work: capture is one binned slope, one SURF extraction and one tile write.
 
 use crate::frame::{DemPatch, FrameError};

@@ -510,9 +510,13 @@ pub fn run(a: &Args, dispatch: &dyn Fn(&[String]) -> anyhow::Result<()>) -> anyh
          from the truth DEM at 20 m with the default 40 m terrain smoothing (`ground-sim tile`, a perfect InSAR; the flyer smooths its frames alike), \
          except in the section on the InSAR reference, whose tiles come out of the simulated radar (`ground-sim insar`); frames are synthesised from the truth DEM at \
          10 m with 0.5 m range noise and 0.5 % dropouts (`ground-sim trn`). \
-         The onboard chain is the flight code's defaults with the firmware's budget (`nav_core::flight`: 16 keypoints, 128 matches; every campaign below flies it): SURF, matching and MSAC give the feature fix, which is then refined over the frame's pixels \
+         The onboard chain is the flight code's defaults with the firmware's budget (`nav_core::flight`: {} keypoints, {} matches; every campaign below flies it): SURF, matching and MSAC give the feature fix, which is then refined over the frame's pixels \
          against the tile's slope raster and refused where that slope correlation contradicts it (`nav_core::refine`, docs/registration.md).\n",
-        a.seed, a.trials, a.runs
+        a.seed,
+        a.trials,
+        a.runs,
+        nav_core::flight::MAX_KEYPOINTS,
+        nav_core::flight::MAX_MATCHES
     )?;
     suite_section(&mut md, a, &go)?;
     // The paper's four cases.

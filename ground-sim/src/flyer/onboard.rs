@@ -2,7 +2,7 @@
 //! workspace, plus what the ground side wants back from a frame (timing, matched pairs).
 //!
 //! Two budgets: [`Budget::Flight`], the firmware's own ([`nav_core::flight`]: 200 × 200 px
-//! frames, 16 keypoints, 128 matches), which every campaign uses unless told otherwise, and
+//! frames, [`nav_core::flight::MAX_KEYPOINTS`] keypoints, 128 matches), which every campaign uses unless told otherwise, and
 //! [`Budget::Host`], a bigger one for frames up to 512 px and image registration on the ground
 //! (and no per-frame work budget, `NavConfig::work_budget`),
 //! only ever chosen explicitly and labelled in every output.
@@ -42,7 +42,8 @@ pub const WORKSPACE_STACK: usize = 64 << 20;
 )]
 #[serde(rename_all = "lowercase")]
 pub enum Budget {
-    /// The firmware's: [`nav_core::flight`] (200 × 200 px frames, 16 keypoints, 128 matches).
+    /// The firmware's: [`nav_core::flight`] (200 × 200 px frames, [`nav_core::flight::MAX_KEYPOINTS`]
+    /// keypoints, 128 matches).
     #[default]
     Flight,
     /// Bigger than what flies: 512 × 512 px frames, 256 keypoints, 256 matches.
