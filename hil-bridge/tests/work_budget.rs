@@ -118,8 +118,9 @@ fn a_failed_search_leaves_no_room_for_the_feature_path_under_a_small_budget() {
         center_tile_px: [p.center_tile_px[0] + 40.0, p.center_tile_px[1]],
         ..p
     };
-    // Slope (5.6 M) and a failed search leave less than detection and 16 keypoints (10.4 M)
-    // under 12 M: the frame ends without SURF, and says why.
+    // Slope (5.6 M) and a failed search leave less than detection, a whole keypoint budget and
+    // its matching (9.6 M for 24 keypoints on this tile) under 12 M: the frame ends without
+    // SURF, and says why.
     let nav = Navigator::new(
         tile,
         NavConfig {

@@ -116,6 +116,7 @@ impl AtlasHeader<'_> {
                 layers: self.layers,
                 threshold: self.threshold,
                 min_scale_px: self.min_scale_px,
+                max_lazy_responses: u32::MAX,
             },
             upright: self.upright,
         }

@@ -186,7 +186,7 @@ mod tests {
     #[test]
     fn flight_frames_fixed_stage_fits_the_budget() {
         // A 200 × 200 frame binned by 2: slope 5.6 M with a prior; lost in space, detection
-        // and 24 keypoints 13.9 M more.
+        // and 24 keypoints 8.27 M more, 13.87 M in all.
         assert_eq!(fixed_first_stage(100 * 100, 0), 5_600_000);
         assert_eq!(
             fixed_first_stage(100 * 100, 0) + detection_stage(100 * 100, 24),

@@ -8,7 +8,9 @@
 //!
 //! Responses are computed a grid row at a time into a ring of three rows per layer, and
 //! non-maximum suppression runs one row behind: memory is `MAX_LAYERS × 3 × width` floats instead
-//! of a full response pyramid.
+//! of a full response pyramid. Layers that can hold no keypoint themselves (an octave's first
+//! and last) are not swept: their responses are computed on demand for the candidates whose
+//! maximum test reaches them (at most [`MAX_LAZY_RESPONSES`] a run), with the same values.
 
 use crate::frame::{FrameError, SlopeImage, slope_is_valid};
 use crate::integral::Integral;
@@ -57,6 +59,10 @@ pub struct DetectorConfig {
     /// smallest scale in frame pixels, so the budget is not spent on detail the reference cannot
     /// show. 0 keeps everything.
     pub min_scale_px: f32,
+    /// Most lazy-layer responses one run computes ([`MAX_LAZY_RESPONSES`] for flight frames,
+    /// set by [`crate::Navigator::frame_surf_config`] under a work budget; `u32::MAX`, the
+    /// default, for reference tiles built on the ground).
+    pub max_lazy_responses: u32,
 }
 
 impl Default for DetectorConfig {
@@ -66,6 +72,7 @@ impl Default for DetectorConfig {
             layers: 4,
             threshold: 0.1,
             min_scale_px: 0.0,
+            max_lazy_responses: u32::MAX,
         }
     }
 }
@@ -375,7 +382,26 @@ pub struct DetectStats {
     pub rejected_refine: u32,
     /// Keypoints below `min_scale_px`.
     pub rejected_scale: u32,
+    /// Responses of the lazy layers computed for candidates' maximum tests (at most
+    /// [`DetectorConfig::max_lazy_responses`]).
+    pub lazy_responses: u32,
+    /// Lazy responses a candidate needed after [`DetectorConfig::max_lazy_responses`] were
+    /// spent: each ended
+    /// that candidate's test as "not a maximum" (0 on every frame measured; the cap keeps
+    /// detection's work inside what [`crate::cost`] charges on any input).
+    pub lazy_refused: u32,
 }
+
+/// Most responses of the lazy layers one detection run of a flight frame computes on demand
+/// ([`DetectorConfig::max_lazy_responses`]; reference tiles, built on the ground without a
+/// work budget, are not capped). Past it a candidate
+/// that needs one more is taken as no maximum and counted in [`DetectStats::lazy_refused`].
+/// Detection's charge in [`crate::cost`] (3.95 M for a 100 × 100 binned frame) exceeds the
+/// sweep of a featureless frame (3.06 M) by ≈ 0.89 M; a lazy response costs ≈ 360 Cortex-M4
+/// instructions with its test (QEMU, session 41: `stress-max_keypoints`, 788 of them, 0.28 M),
+/// so 2 000 (0.72 M) keep the lazy layers inside that margin on any input and detection is
+/// bounded by construction. The most any of the 385 frames of seven HIL sets needed is 804.
+pub const MAX_LAZY_RESPONSES: u32 = 2_000;
 
 /// Run the detector, handing every accepted keypoint to `sink` (in a deterministic order).
 pub(crate) fn detect(
@@ -400,6 +426,7 @@ pub(crate) fn detect(
         None
     };
     let mut stats = DetectStats::default();
+    let (mut lazy_done, mut lazy_refused) = (0u32, 0u32);
     let layers = cfg.layers as usize;
     let data = ii.data();
     for octave in 0..cfg.octaves as usize {
@@ -419,8 +446,9 @@ pub(crate) fn detect(
             |layer: usize| live(layer) || live(layer + 1) || (layer > 0 && live(layer - 1));
         // A layer read only as a live layer's neighbour ("lazy": the octave's first and last,
         // with the default four layers) is not swept row by row: a response of it is computed
-        // when a candidate that is already the largest of its own layer's 3 × 3 and of its
-        // other, swept neighbour layer needs it, and kept in the ring for the next candidate.
+        // when a candidate that is already the largest of its own layer's 3 × 3 (and of its
+        // other neighbour layer, when that one is swept) needs it, and kept in the ring for the
+        // next candidate.
         // Most candidates fail before, so half the octave's responses are never computed; the
         // ones that are get exactly the value the sweep would have given (same keypoints).
         let lazy = |layer: usize| needed(layer) && !live(layer);
@@ -526,6 +554,12 @@ pub(crate) fn detect(
                     }
                     stats.candidates = stats.candidates.saturating_add(1);
                     let fill = |li: usize, yi: usize, xx: usize| {
+                        if lazy_done >= cfg.max_lazy_responses {
+                            // Larger than any response: the candidate is no maximum.
+                            lazy_refused = lazy_refused.saturating_add(1);
+                            return f32::INFINITY;
+                        }
+                        lazy_done += 1;
                         let l = order.get(li).copied().unwrap_or(layer);
                         let side = filter_side(octave, l);
                         let at = (xx * step, (cy + yi - 1) * step);
@@ -557,6 +591,8 @@ pub(crate) fn detect(
             }
         }
     }
+    stats.lazy_responses = lazy_done;
+    stats.lazy_refused = lazy_refused;
     Ok(stats)
 }
 

@@ -426,6 +426,11 @@ impl<'t> Navigator<'t> {
     /// minimum scale raised for frames finer than the tile.
     pub fn frame_surf_config(&self, frame_pixel_m: f32) -> SurfConfig {
         let mut cfg = self.tile.header().surf_config();
+        if self.cfg.work_budget != u32::MAX {
+            // Under a work budget the lazy layers are capped so detection stays inside what
+            // `cost` charges for it on any input.
+            cfg.detector.max_lazy_responses = crate::detector::MAX_LAZY_RESPONSES;
+        }
         let ratio = self.tile.header().pixel_m() as f32 / frame_pixel_m;
         if self.cfg.auto_min_scale && ratio > 1.25 {
             cfg.detector.min_scale_px = cfg.detector.min_scale_px.max(SMALLEST_SCALE_PX) * ratio;

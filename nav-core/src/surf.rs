@@ -90,6 +90,8 @@ impl<const N: usize> Features<N> {
                 rejected_nodata: 0,
                 rejected_refine: 0,
                 rejected_scale: 0,
+                lazy_responses: 0,
+                lazy_refused: 0,
             },
         }
     }

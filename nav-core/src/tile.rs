@@ -121,6 +121,7 @@ impl TileHeader<'_> {
                 layers: self.layers,
                 threshold: self.threshold,
                 min_scale_px: self.min_scale_px,
+                max_lazy_responses: u32::MAX,
             },
             upright: self.upright,
         }

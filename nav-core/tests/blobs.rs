@@ -55,6 +55,7 @@ fn blobs_are_found_at_their_subpixel_position_and_scale() {
                     layers: 4,
                     threshold: 0.01,
                     min_scale_px: 0.0,
+                    max_lazy_responses: u32::MAX,
                 },
                 upright: false,
             };

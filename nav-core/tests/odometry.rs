@@ -70,6 +70,7 @@ fn surf() -> SurfConfig {
             layers: 4,
             threshold: 4.3e-4,
             min_scale_px: 0.0,
+            max_lazy_responses: u32::MAX,
         },
         upright: false,
     }

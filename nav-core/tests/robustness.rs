@@ -59,7 +59,7 @@ proptest! {
         layers in 0u8..7,
         upright in any::<bool>(),
     ) {
-        let cfg = SurfConfig { detector: DetectorConfig { octaves, layers, threshold, min_scale_px: 0.0 }, upright };
+        let cfg = SurfConfig { detector: DetectorConfig { octaves, layers, threshold, min_scale_px: 0.0, max_lazy_responses: u32::MAX }, upright };
         // Any outcome is fine except a panic; errors must be the typed ones.
         let _ = chain(&hs, w, h, pixel_m, &cfg);
     }
@@ -243,6 +243,43 @@ fn nodata_never_produces_features() {
         let dy = (39.0 - k.y_px).max(k.y_px - 50.0).max(0.0);
         assert!(dx.hypot(dy) > 4.0, "keypoint {k:?} sits on the hole");
     }
+}
+
+#[test]
+fn lazy_layers_stop_at_their_cap_on_noise() {
+    // White slope noise with a zero threshold: nearly every position is a candidate, far more
+    // of them need the lazy layers than any terrain frame (≤ 804 on the HIL sets). Detection
+    // stops computing them at the cap, counts what it refused and still returns keypoints.
+    const W: usize = 200;
+    let mut state = 0x9e37_79b9_7f4a_7c15u64;
+    let px: Vec<SlopePx> = (0..W * W)
+        .map(|_| {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            slope_from_deg((state >> 40) as f32 / (1u64 << 24) as f32 * 60.0)
+        })
+        .collect();
+    let img = SlopeImage::new_checked(&px, W, W, 20.0).unwrap();
+    let cfg = SurfConfig {
+        detector: DetectorConfig {
+            threshold: 0.0,
+            max_lazy_responses: nav_core::detector::MAX_LAZY_RESPONSES,
+            ..DetectorConfig::default()
+        },
+        upright: false,
+    };
+    let mut ws = Box::new(SurfWorkspace::<{ W * W }, W>::new());
+    let mut out = Features::<32>::new();
+    extract(&img, &cfg, ws.scratch(), &mut out).unwrap();
+    let s = out.stats;
+    assert_eq!(
+        s.lazy_responses,
+        nav_core::detector::MAX_LAZY_RESPONSES,
+        "{s:?}"
+    );
+    assert!(s.lazy_refused > 0, "{s:?}");
+    assert!(s.maxima > 0 && !out.is_empty(), "{s:?}");
 }
 
 /// FNV-1a over the bits of every keypoint field and descriptor value.
