@@ -409,7 +409,20 @@ pub(crate) fn detect(
     ii: &Integral<'_>,
     cfg: &DetectorConfig,
     ring: &mut [f32],
+    sink: impl FnMut(Keypoint),
+) -> Result<DetectStats, FrameError> {
+    detect_swept(img, ii, cfg, ring, sink, false)
+}
+
+/// [`detect`], with `sweep_all` sweeping every layer row by row as before session 41 (the
+/// tests' reference for the lazy layers).
+fn detect_swept(
+    img: &SlopeImage<'_>,
+    ii: &Integral<'_>,
+    cfg: &DetectorConfig,
+    ring: &mut [f32],
     mut sink: impl FnMut(Keypoint),
+    sweep_all: bool,
 ) -> Result<DetectStats, FrameError> {
     let (w, h) = (img.width(), img.height());
     let needed = ring_len(w);
@@ -451,7 +464,7 @@ pub(crate) fn detect(
         // next candidate.
         // Most candidates fail before, so half the octave's responses are never computed; the
         // ones that are get exactly the value the sweep would have given (same keypoints).
-        let lazy = |layer: usize| needed(layer) && !live(layer);
+        let lazy = |layer: usize| !sweep_all && needed(layer) && !live(layer);
         let step = sample_step(octave);
         let kernels: [Kernel; MAX_LAYERS] =
             core::array::from_fn(|layer| Kernel::new(filter_side(octave, layer), w));
@@ -822,4 +835,116 @@ fn refine(
         response,
         laplacian_positive: lap,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::frame::{SlopePx, slope_from_deg};
+
+    /// Keypoints (all fields' bits) and the shared counters of one run.
+    fn run(px: &[SlopePx], w: usize, cfg: &DetectorConfig, sweep_all: bool) -> std::vec::Vec<u32> {
+        let h = px.len() / w;
+        let img = SlopeImage::new_checked(px, w, h, 20.0).unwrap();
+        let mut integral = std::vec![0u32; w * h];
+        let ii = Integral::build(&img, &mut integral).unwrap();
+        let mut ring = std::vec![0.0f32; ring_len(w)];
+        let mut out = std::vec::Vec::new();
+        let stats = detect_swept(
+            &img,
+            &ii,
+            cfg,
+            &mut ring,
+            |k| {
+                out.extend([k.x_px, k.y_px, k.scale_px, k.response].map(f32::to_bits));
+                out.push(k.laplacian_positive as u32);
+            },
+            sweep_all,
+        )
+        .unwrap();
+        out.extend([
+            stats.candidates,
+            stats.maxima,
+            stats.rejected_nodata,
+            stats.rejected_refine,
+            stats.rejected_scale,
+        ]);
+        out
+    }
+
+    #[test]
+    fn lazy_layers_give_the_keypoints_of_the_full_sweep() {
+        // Smooth random blobs plus noise, with and without a hole, on square and narrow
+        // frames; 4 and 5 layers, up to 4 octaves, a raised minimum scale (only some layers
+        // live) and a zero threshold (every position a candidate, lazy responses uncapped).
+        let mut state = 0x2545_f491_4f6c_dd1du64;
+        let mut next = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 40) as f32 / (1u64 << 24) as f32
+        };
+        let mut compared = 0;
+        for (w, h) in [(120usize, 120usize), (200, 64), (40, 150)] {
+            let blobs: std::vec::Vec<(f32, f32, f32, f32)> = (0..40)
+                .map(|_| {
+                    (
+                        next() * w as f32,
+                        next() * h as f32,
+                        1.5 + next() * 8.0,
+                        next() * 30.0,
+                    )
+                })
+                .collect();
+            let mut px: std::vec::Vec<SlopePx> = (0..w * h)
+                .map(|i| {
+                    let (x, y) = ((i % w) as f32, (i / w) as f32);
+                    let v: f32 = blobs
+                        .iter()
+                        .map(|&(bx, by, s, a)| {
+                            a * libm::expf(-((x - bx).powi(2) + (y - by).powi(2)) / (2.0 * s * s))
+                        })
+                        .sum();
+                    slope_from_deg((v + next() * 2.0).min(89.0))
+                })
+                .collect();
+            for hole in [false, true] {
+                if hole {
+                    for r in h / 3..h / 3 + 6 {
+                        for c in w / 4..w / 2 {
+                            px[r * w + c] = crate::frame::SLOPE_NODATA;
+                        }
+                    }
+                }
+                for cfg in [
+                    DetectorConfig {
+                        threshold: 0.01,
+                        ..DetectorConfig::default()
+                    },
+                    DetectorConfig {
+                        threshold: 0.0,
+                        layers: 5,
+                        octaves: 4,
+                        ..DetectorConfig::default()
+                    },
+                    DetectorConfig {
+                        threshold: 0.01,
+                        min_scale_px: 4.0,
+                        ..DetectorConfig::default()
+                    },
+                    DetectorConfig {
+                        threshold: 0.0,
+                        layers: 5,
+                        min_scale_px: 6.0,
+                        ..DetectorConfig::default()
+                    },
+                ] {
+                    let (lazy, swept) = (run(&px, w, &cfg, false), run(&px, w, &cfg, true));
+                    assert_eq!(lazy, swept, "{w}×{h}, hole {hole}, {cfg:?}");
+                    compared += (lazy.len() - 5) / 5;
+                }
+            }
+        }
+        assert!(compared > 200, "only {compared} keypoints compared");
+    }
 }
