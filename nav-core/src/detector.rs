@@ -386,16 +386,15 @@ pub struct DetectStats {
     /// [`DetectorConfig::max_lazy_responses`]).
     pub lazy_responses: u32,
     /// Lazy responses a candidate needed after [`DetectorConfig::max_lazy_responses`] were
-    /// spent: each ended
-    /// that candidate's test as "not a maximum" (0 on every frame measured; the cap keeps
-    /// detection's work inside what [`crate::cost`] charges on any input).
+    /// spent: each ended that candidate's test as "not a maximum" (0 on every frame of the HIL
+    /// sets; the cap keeps detection's work inside what [`crate::cost`] charges on any input).
     pub lazy_refused: u32,
 }
 
 /// Most responses of the lazy layers one detection run of a flight frame computes on demand
 /// ([`DetectorConfig::max_lazy_responses`]; reference tiles, built on the ground without a
-/// work budget, are not capped). Past it a candidate
-/// that needs one more is taken as no maximum and counted in [`DetectStats::lazy_refused`].
+/// work budget, are not capped). Past it a candidate that needs one more is taken as no
+/// maximum and counted in [`DetectStats::lazy_refused`].
 /// Detection's charge in [`crate::cost`] (3.95 M for a 100 × 100 binned frame) exceeds the
 /// sweep of a featureless frame (3.06 M) by ≈ 0.89 M; a lazy response costs ≈ 360 Cortex-M4
 /// instructions with its test (QEMU, session 41: `stress-max_keypoints`, 788 of them, 0.28 M),
@@ -877,13 +876,8 @@ mod tests {
         // Smooth random blobs plus noise, with and without a hole, on square and narrow
         // frames; 4 and 5 layers, up to 4 octaves, a raised minimum scale (only some layers
         // live) and a zero threshold (every position a candidate, lazy responses uncapped).
-        let mut state = 0x2545_f491_4f6c_dd1du64;
-        let mut next = move || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            (state >> 40) as f32 / (1u64 << 24) as f32
-        };
+        let mut rng = crate::rng::Pcg32::new(41, 1);
+        let mut next = move || (rng.next_u32() >> 8) as f32 / (1u32 << 24) as f32;
         let mut compared = 0;
         for (w, h) in [(120usize, 120usize), (200, 64), (40, 150)] {
             let blobs: std::vec::Vec<(f32, f32, f32, f32)> = (0..40)

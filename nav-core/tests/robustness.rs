@@ -251,14 +251,9 @@ fn lazy_layers_stop_at_their_cap_on_noise() {
     // of them need the lazy layers than any terrain frame (≤ 804 on the HIL sets). Detection
     // stops computing them at the cap, counts what it refused and still returns keypoints.
     const W: usize = 200;
-    let mut state = 0x9e37_79b9_7f4a_7c15u64;
+    let mut rng = nav_core::rng::Pcg32::new(41, 2);
     let px: Vec<SlopePx> = (0..W * W)
-        .map(|_| {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            slope_from_deg((state >> 40) as f32 / (1u64 << 24) as f32 * 60.0)
-        })
+        .map(|_| slope_from_deg((rng.next_u32() >> 8) as f32 / (1u32 << 24) as f32 * 60.0))
         .collect();
     let img = SlopeImage::new_checked(&px, W, W, 20.0).unwrap();
     let cfg = SurfConfig {
