@@ -10,6 +10,7 @@
 
 mod geotiff;
 mod resample;
+pub mod spectrum;
 pub mod stats;
 
 pub use geotiff::{

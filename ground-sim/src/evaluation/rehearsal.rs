@@ -6,12 +6,13 @@
 //! bound). The flyer's frames will come from the true terrain, which differs from the map by the
 //! map's error. A rehearsal therefore flies frames from one plausible truth: a draw of the
 //! terrain given the reference DEM and that error (Gaussian, at the reported σ, correlated by
-//! the DEM's blur; [`plausible_truth`]; a truth-built map claims none, and its DEM is the
-//! truth), its holes (the InSAR mask) filled smoothly, so frames there carry nothing the tile
-//! could match. Sites lie on a regular grid over the box where a frame
-//! fits the map; each flies a few frames at stratified headings, random pixel sizes in the
-//! campaign's range, the sensor's noise and, if asked, a prior drawn like a campaign's. A
-//! site's success fraction is the prediction; between sites it is interpolated bilinearly.
+//! the DEM's blur, scaled per octave by what a two-look map measured of its own error;
+//! [`plausible_truth`]; a truth-built map claims none, and its DEM is the truth), its holes
+//! (the InSAR mask) filled smoothly, so frames there carry nothing the tile could match. Sites
+//! lie on a regular grid over the box where a frame fits the map; each flies a few frames at
+//! stratified headings, random pixel sizes in the campaign's range, the sensor's noise and, if
+//! asked, a prior drawn like a campaign's. A site's success fraction is the prediction;
+//! between sites it is interpolated bilinearly.
 //!
 //! Unlike the footprint rule ([`super::navmap`]), nothing here is a threshold on a proxy
 //! (feature counts, slope texture): whatever makes the flight code fail (too few features,
@@ -30,6 +31,7 @@ use serde::Serialize;
 
 use std::path::Path;
 
+use crate::dem::spectrum::{BAND_EDGES, band_of, fft2};
 use crate::dem::{Dem, read_geotiff};
 use crate::evaluation::campaign::{CampaignSpec, centre_box, fly_posed, normal};
 use crate::flyer::frames::FramePose;
@@ -214,12 +216,18 @@ impl Rehearsal {
 /// noise passed like its signal: 0.82 at 20 m, where the suite's InSAR height-error maps
 /// of the plains and lola read 0.81–0.83), or, for a DEM made with the quadratic filter, whose
 /// signal blur (10 m) is not its noise's, the product's `error_blur_m` (30.4 m at 2 px).
+/// A map made from two looks also measured how far its real error departs from that model,
+/// per octave of spatial frequency, from the two looks' disagreement
+/// (`insar::pipeline::LookFusion::error_spectrum_ratio`); the draw scales the model by it.
 #[derive(Debug, Clone)]
 pub struct ErrorModel {
     /// Height 1σ per cell, metres, on the reference DEM's grid (`None`: the map claims none).
     pub sigma: Option<Dem>,
     /// Correlation: σ of the Gaussian the error field is smoothed with, metres (0: white).
     pub blur_m: f64,
+    /// The error's power over the model's (σ and blur above) in each octave band of
+    /// [`BAND_EDGES`] (cycles per map pixel); all 1: the model as it stands.
+    pub band_ratio: [f64; BAND_EDGES.len()],
 }
 
 impl ErrorModel {
@@ -228,6 +236,16 @@ impl ErrorModel {
         Self {
             sigma: None,
             blur_m: 0.0,
+            band_ratio: [1.0; BAND_EDGES.len()],
+        }
+    }
+
+    /// A model with per-cell `sigma` and correlation `blur_m`, uncalibrated (band ratios 1).
+    pub fn with_sigma(sigma: Dem, blur_m: f64) -> Self {
+        Self {
+            sigma: Some(sigma),
+            blur_m,
+            band_ratio: [1.0; BAND_EDGES.len()],
         }
     }
 
@@ -249,9 +267,25 @@ impl ErrorModel {
         // variance, silently.
         let report = dir.join("report.json");
         let mut reported_blur = None;
+        let mut band_ratio = [1.0; BAND_EDGES.len()];
         if sigma.is_some() && report.exists() {
             let v = read_json(&report)?;
             reported_blur = v.get("error_blur_m").and_then(|b| b.as_f64());
+            // The two looks' measure of the error spectrum, when the map has one.
+            if let Some(r) = v
+                .pointer("/looks/error_spectrum_ratio")
+                .and_then(|r| r.as_array())
+            {
+                let r: Vec<f64> = r.iter().filter_map(|x| x.as_f64()).collect();
+                if r.len() != band_ratio.len() || !r.iter().all(|x| x.is_finite() && *x > 0.0) {
+                    bail!(
+                        "{}: looks.error_spectrum_ratio must be {} positive numbers",
+                        report.display(),
+                        band_ratio.len()
+                    );
+                }
+                band_ratio.copy_from_slice(&r);
+            }
             if v.get("crlb_filter_factor").is_none() {
                 bail!(
                     "{}: this InSAR product predates the height bound that follows the DEM \
@@ -272,7 +306,11 @@ impl ErrorModel {
         } else {
             0.0
         };
-        Ok(Self { sigma, blur_m })
+        Ok(Self {
+            sigma,
+            blur_m,
+            band_ratio,
+        })
     }
 }
 
@@ -349,7 +387,14 @@ pub fn plausible_truth(dem: &Dem, error: &ErrorModel, seed: u64) -> anyhow::Resu
         .collect();
     let blur_px = error.blur_m / dem.pixel_m()?;
     let z: Vec<f64> = out.heights_m().iter().map(|&v| f64::from(v)).collect();
-    let spectra = PosteriorSpectra::new(&z, w, h, blur_px, seed ^ 0x5EED_0E22_0000_0001);
+    let spectra = PosteriorSpectra::new(
+        &z,
+        w,
+        h,
+        blur_px,
+        error.band_ratio,
+        seed ^ 0x5EED_0E22_0000_0001,
+    );
     let levels = variance_levels(&var);
     let drawn = if let [only] = levels[..] {
         spectra.draw(only)
@@ -410,13 +455,21 @@ struct PosteriorSpectra {
     power: Vec<f64>,
     shape_mean: f64,
     blur_px: f64,
+    band_ratio: [f64; BAND_EDGES.len()],
     mean: f64,
     w: usize,
     h: usize,
 }
 
 impl PosteriorSpectra {
-    fn new(z: &[f64], w: usize, h: usize, blur_px: f64, seed: u64) -> Self {
+    fn new(
+        z: &[f64],
+        w: usize,
+        h: usize,
+        blur_px: f64,
+        band_ratio: [f64; BAND_EDGES.len()],
+        seed: u64,
+    ) -> Self {
         use rustfft::num_complex::Complex64;
         let (pw, ph) = (2 * w, 2 * h);
         let n = pw * ph;
@@ -437,6 +490,7 @@ impl PosteriorSpectra {
             power: Vec::new(),
             shape_mean: 1.0,
             blur_px,
+            band_ratio,
             mean,
             w,
             h,
@@ -464,16 +518,7 @@ impl PosteriorSpectra {
 
     /// Frequency of coefficient `i` of the mirrored grid, cycles per pixel.
     fn radius(&self, i: usize) -> f64 {
-        let (pw, ph) = (2 * self.w, 2 * self.h);
-        let freq = |k: usize, len: usize| -> f64 {
-            let (k, len) = (k as f64, len as f64);
-            if k < len / 2.0 {
-                k / len
-            } else {
-                (k - len) / len
-            }
-        };
-        freq(i % pw, pw).hypot(freq(i / pw, ph))
+        crate::dem::spectrum::frequency(i, 2 * self.w, 2 * self.h)
     }
 
     fn ring_width(&self) -> f64 {
@@ -504,8 +549,10 @@ impl PosteriorSpectra {
             // (Coefficient 0 is the mean, known.)
             let p = self.power[self.ring(i)];
             // Scaled to its variance: a periodogram's mean over all frequencies is the variance.
-            let noise =
-                noise_var * self.shape(self.radius(i)) / self.shape_mean.max(f64::MIN_POSITIVE);
+            // The model's spectrum, scaled by what the two looks measured in its octave.
+            let f = self.radius(i);
+            let noise = noise_var * self.shape(f) / self.shape_mean.max(f64::MIN_POSITIVE)
+                * self.band_ratio[band_of(f)];
             let signal = (p - noise).max(0.0);
             *c = if p > 0.0 {
                 *c * (signal / p) + *e * (signal * noise / p).sqrt()
@@ -518,30 +565,6 @@ impl PosteriorSpectra {
             .map(|i| out[(i / self.w) * pw + i % self.w].re / n as f64 + self.mean)
             .collect()
     }
-}
-
-/// In-place 2-D FFT of a row-major `w × h` grid (the inverse unnormalised, as rustfft's).
-fn fft2(data: &mut [rustfft::num_complex::Complex64], w: usize, h: usize, inverse: bool) {
-    use rustfft::num_complex::Complex64;
-    let mut planner = rustfft::FftPlanner::<f64>::new();
-    let (row, col) = if inverse {
-        (planner.plan_fft_inverse(w), planner.plan_fft_inverse(h))
-    } else {
-        (planner.plan_fft_forward(w), planner.plan_fft_forward(h))
-    };
-    data.par_chunks_mut(w).for_each(|r| row.process(r));
-    let mut t = vec![Complex64::new(0.0, 0.0); w * h];
-    t.par_chunks_mut(h).enumerate().for_each(|(x, c)| {
-        for (y, v) in c.iter_mut().enumerate() {
-            *v = data[y * w + x];
-        }
-    });
-    t.par_chunks_mut(h).for_each(|c| col.process(c));
-    data.par_chunks_mut(w).enumerate().for_each(|(y, r)| {
-        for (x, v) in r.iter_mut().enumerate() {
-            *v = t[x * h + y];
-        }
-    });
 }
 
 /// Rehearse the map: fly `spec.frames_per_site` frames at every site against `tile` (with
@@ -717,10 +740,7 @@ mod tests {
             .collect();
         let map = Dem::new(w, h, z, geo.clone()).unwrap();
         let sigma = Dem::new(w, h, (0..w * h).map(sd).collect(), geo).unwrap();
-        let e = ErrorModel {
-            sigma: Some(sigma),
-            blur_m: 22.4,
-        };
+        let e = ErrorModel::with_sigma(sigma, 22.4);
         let t = plausible_truth(&map, &e, 9).unwrap();
         // Away from the seam (8 px) and the edges' mirror (8 px).
         let rms = |west: bool| {
@@ -763,10 +783,7 @@ mod tests {
         z[64 * w + 64] = f32::NAN;
         let map = Dem::new(w, h, z, geo.clone()).unwrap();
         let sigma = Dem::new(w, h, vec![2.0f32; w * h], geo.clone()).unwrap();
-        let e = ErrorModel {
-            sigma: Some(sigma),
-            blur_m: 22.4,
-        };
+        let e = ErrorModel::with_sigma(sigma, 22.4);
         let t = plausible_truth(&map, &e, 3).unwrap();
         assert!(t.heights_m().iter().all(|v| v.is_finite()));
         let lag1 = |z: &[f64]| {
@@ -801,6 +818,24 @@ mod tests {
             .collect();
         let rms = (diff.iter().map(|d| d * d).sum::<f64>() / diff.len() as f64).sqrt();
         assert!((rms - 2.0).abs() < 0.3, "draw − map rms {rms}");
+        // Two looks that measured the error at a quarter of its bound's power in every
+        // octave: the draw departs from the map by 1 m, not the bound's 2 m.
+        let calibrated = ErrorModel {
+            band_ratio: [0.25; BAND_EDGES.len()],
+            ..e.clone()
+        };
+        let tq = as64(&plausible_truth(&map, &calibrated, 3).unwrap());
+        let d: Vec<f64> = tq
+            .iter()
+            .zip(&mz)
+            .filter(|(_, m)| m.is_finite())
+            .map(|(a, b)| a - b)
+            .collect();
+        let rms_q = (d.iter().map(|d| d * d).sum::<f64>() / d.len() as f64).sqrt();
+        assert!(
+            (rms_q - 1.0).abs() < 0.2,
+            "calibrated draw − map rms {rms_q}"
+        );
         // Reproducible; another seed, another draw.
         assert_eq!(
             plausible_truth(&map, &e, 3).unwrap().heights_m(),
@@ -817,10 +852,7 @@ mod tests {
         }
         assert!(none.heights_m()[64 * w + 64].is_finite());
         let small = Dem::new(10, 10, vec![1.0f32; 100], geo).unwrap();
-        let bad = ErrorModel {
-            sigma: Some(small),
-            blur_m: 0.0,
-        };
+        let bad = ErrorModel::with_sigma(small, 0.0);
         assert!(plausible_truth(&map, &bad, 3).is_err());
     }
 
@@ -862,5 +894,24 @@ mod tests {
         )
         .unwrap();
         assert_eq!(ErrorModel::load(dir.path()).unwrap().blur_m, 30.36);
+        // A two-look map's measure of its error spectrum scales the draw; a malformed one is
+        // refused rather than ignored.
+        assert_eq!(ErrorModel::load(dir.path()).unwrap().band_ratio, [1.0; 6]);
+        std::fs::write(
+            &report,
+            r#"{"crlb_filter_factor": 0.5, "looks": {"error_spectrum_ratio": [1.5, 2, 1, 0.8, 3, 4]}}"#,
+        )
+        .unwrap();
+        assert_eq!(
+            ErrorModel::load(dir.path()).unwrap().band_ratio,
+            [1.5, 2.0, 1.0, 0.8, 3.0, 4.0]
+        );
+        std::fs::write(
+            &report,
+            r#"{"crlb_filter_factor": 0.5, "looks": {"error_spectrum_ratio": [1.5, 2, 1]}}"#,
+        )
+        .unwrap();
+        let e = ErrorModel::load(dir.path()).unwrap_err().to_string();
+        assert!(e.contains("error_spectrum_ratio"), "{e}");
     }
 }

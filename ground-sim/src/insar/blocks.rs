@@ -692,6 +692,18 @@ fn fused_looks(blocks: &[BlockProduct]) -> Option<LookFusion> {
             .map(|(_, l)| l.worst_window_one_look_share)
             .filter(|v| v.is_finite())
             .fold(f64::NAN, f64::max),
+        // Per octave, the blocks' ratios weighted by their cells (the blocks that measured
+        // one); none if no block did.
+        error_spectrum_ratio: {
+            let with: Vec<(f64, [f64; crate::dem::spectrum::BAND_EDGES.len()])> = parts
+                .iter()
+                .filter_map(|(n, l)| l.error_spectrum_ratio.map(|r| (*n, r)))
+                .collect();
+            let total: f64 = with.iter().map(|(n, _)| n).sum();
+            (total > 0.0).then(|| {
+                core::array::from_fn(|b| with.iter().map(|(n, r)| n * r[b]).sum::<f64>() / total)
+            })
+        },
     })
 }
 

@@ -393,6 +393,71 @@ pub struct LookFusion {
         deserialize_with = "crate::evaluation::shard::f64_or_nan"
     )]
     pub worst_window_one_look_share: f64,
+    /// The map's height error measured against its own bound, from the two looks'
+    /// disagreement: per octave band of `dem::spectrum::BAND_EDGES` (cycles per map pixel),
+    /// the power of the east − west height difference over the cells valid in both, divided
+    /// by the power the bound predicts for that difference (√(σ_e² + σ_w²) per cell times
+    /// noise with the map's error correlation, masked alike). 1: the bound is right in that
+    /// octave; 2: the real error has twice its power. Errors both looks share do not show.
+    /// `None` with fewer than [`ERROR_SPECTRUM_MIN_CELLS`] cells valid in both.
+    #[serde(default)]
+    pub error_spectrum_ratio: Option<[f64; crate::dem::spectrum::BAND_EDGES.len()]>,
+}
+
+/// Least cells valid in both looks for [`LookFusion::error_spectrum_ratio`].
+pub const ERROR_SPECTRUM_MIN_CELLS: usize = 1024;
+/// Draws of the bound's noise averaged for the ratio's denominator (each octave of a 200²
+/// map holds ≥ 100 coefficients, so one draw is within ≈ 10 %; four, ≈ 5 %).
+const ERROR_SPECTRUM_DRAWS: u64 = 4;
+
+/// [`LookFusion::error_spectrum_ratio`] from the two looks' heights and bounds on one grid
+/// (`w` wide), the cells `both` valid and consistent, the error's correlation `blur_px`.
+fn look_error_spectrum(
+    (ze, zw): (&[f32], &[f32]),
+    (se, sw): (&[f32], &[f32]),
+    both: &[bool],
+    w: usize,
+    blur_px: f64,
+) -> Option<[f64; crate::dem::spectrum::BAND_EDGES.len()]> {
+    use crate::dem::spectrum::{band_powers, correlated_noise};
+    let n = both.len();
+    let h = n / w.max(1);
+    let var: Vec<f64> = (0..n)
+        .map(|i| {
+            let v = f64::from(se[i]).powi(2) + f64::from(sw[i]).powi(2);
+            if both[i] && v.is_finite() && v > 0.0 {
+                v
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    let cells = var.iter().filter(|&&v| v > 0.0).count();
+    if cells < ERROR_SPECTRUM_MIN_CELLS || w * h != n {
+        return None;
+    }
+    // Each field less its mean over the cells it has (a bias between the looks is not an
+    // error the draw should shape), zero elsewhere.
+    let centred = |f: &dyn Fn(usize) -> f64| -> Vec<f64> {
+        let mean = (0..n).filter(|&i| var[i] > 0.0).map(f).sum::<f64>() / cells as f64;
+        (0..n)
+            .map(|i| if var[i] > 0.0 { f(i) - mean } else { 0.0 })
+            .collect()
+    };
+    let diff = centred(&|i| f64::from(ze[i]) - f64::from(zw[i]));
+    let measured = band_powers(&diff, w, h);
+    let mut model = [0.0; crate::dem::spectrum::BAND_EDGES.len()];
+    for k in 0..ERROR_SPECTRUM_DRAWS {
+        let u = correlated_noise(w, h, blur_px, 0x4C4F_4F4B_5350_4543 ^ k);
+        let m = centred(&|i| var[i].sqrt() * u[i]);
+        for (a, b) in model.iter_mut().zip(band_powers(&m, w, h)) {
+            *a += b / ERROR_SPECTRUM_DRAWS as f64;
+        }
+    }
+    Some(core::array::from_fn(|b| {
+        let r = measured[b] / model[b];
+        if r.is_finite() && r > 0.0 { r } else { 1.0 }
+    }))
 }
 
 fn nan() -> f64 {
@@ -1256,8 +1321,9 @@ pub fn fuse_looks(east: &mut InsarProduct, west: &InsarProduct) -> anyhow::Resul
     let mut dem = east.dem.heights_m().to_vec();
     let mut coh = east.coherence.heights_m().to_vec();
     let mut sig = east.crlb_m.heights_m().to_vec();
-    // Per cell: valid after fusion, and made by one look alone.
+    // Per cell: valid after fusion, made by one look alone, and valid and consistent in both.
     let (mut valid_fused, mut one_look) = (vec![false; n], vec![false; n]);
+    let mut both_ok = vec![false; n];
     for i in 0..n {
         let ev = east.labels[i] == label::VALID && dem[i].is_finite();
         let wv = wl[i] == label::VALID && wd[i].is_finite();
@@ -1278,6 +1344,7 @@ pub fn fuse_looks(east: &mut InsarProduct, west: &InsarProduct) -> anyhow::Resul
             }
             (true, true) => {
                 both += 1;
+                both_ok[i] = true;
                 // Inverse-variance weights; equal weights where a bound is missing.
                 let (se, sw) = (f64::from(sig[i]), f64::from(ws[i]));
                 let (ie, iw) = if se > 0.0 && sw > 0.0 && se.is_finite() && sw.is_finite() {
@@ -1314,6 +1381,20 @@ pub fn fuse_looks(east: &mut InsarProduct, west: &InsarProduct) -> anyhow::Resul
         w,
         ONE_LOOK_WINDOW_M / east.grid.pixel_m,
     );
+    // The error's correlation as the rehearsal models it (`evaluation::rehearsal::ErrorModel`):
+    // the quadratic filter's noise blur, else the DEM's own signal blur.
+    let blur_m = if east.config.dem_filter == DemFilterKind::Quadratic {
+        east.error_blur_m
+    } else {
+        east.config.inherent_smoothing_m()
+    };
+    let error_spectrum_ratio = look_error_spectrum(
+        (east.dem.heights_m(), &wd),
+        (east.crlb_m.heights_m(), &ws),
+        &both_ok,
+        w,
+        blur_m / east.grid.pixel_m,
+    );
     east.dem = east.grid.raster(dem)?;
     east.coherence = east.grid.raster(coh)?;
     east.crlb_m = east.grid.raster(sig)?;
@@ -1328,6 +1409,7 @@ pub fn fuse_looks(east: &mut InsarProduct, west: &InsarProduct) -> anyhow::Resul
         inconsistent: frac(inconsistent),
         west_cycles_shifted,
         worst_window_one_look_share,
+        error_spectrum_ratio,
     };
     east.look_fusion = Some(fusion);
     east.seconds += west.seconds;
@@ -1467,4 +1549,55 @@ pub fn process_slc_stack(
         },
         product,
     ))
+}
+
+#[cfg(test)]
+mod spectrum_tests {
+    use super::*;
+    use crate::dem::spectrum::correlated_noise;
+
+    /// Two looks whose errors are `k` times their bounds in every octave: the ratio reads k²
+    /// there; terrain both looks share cancels; too few cells give none.
+    #[test]
+    fn the_looks_disagreement_measures_the_error_against_its_bound() {
+        let (w, h) = (200, 160);
+        let n = w * h;
+        let blur = 22.4 / 20.0;
+        // Bounds that vary over the map (a steep east half), as on a crater's map.
+        let se: Vec<f32> = (0..n)
+            .map(|i| if i % w < w / 2 { 1.0 } else { 3.0 })
+            .collect();
+        let sw = vec![1.5f32; n];
+        // A tenth of the cells seen by one look only.
+        let both: Vec<bool> = (0..n).map(|i| (i / w) % 10 != 3).collect();
+        let (u1, u2) = (
+            correlated_noise(w, h, blur, 1),
+            correlated_noise(w, h, blur, 2),
+        );
+        // Terrain both looks see (a bowl and a ridge), hundreds of metres of relief.
+        let terrain = |i: usize| {
+            let (x, y) = ((i % w) as f64 - 100.0, (i / w) as f64 - 80.0);
+            0.01 * (x * x + y * y) + 40.0 * (x / 7.0).sin()
+        };
+        for k in [1.0f64, 1.5] {
+            let ze: Vec<f32> = (0..n)
+                .map(|i| (terrain(i) + k * f64::from(se[i]) * u1[i]) as f32)
+                .collect();
+            let zw: Vec<f32> = (0..n)
+                .map(|i| (terrain(i) + k * f64::from(sw[i]) * u2[i]) as f32)
+                .collect();
+            let r = look_error_spectrum((&ze, &zw), (&se, &sw), &both, w, blur).unwrap();
+            // The octaves up to 1/2 cycle per pixel hold the blurred noise's power; the
+            // corners beyond hold 0.03 % of it and are not judged.
+            for (b, &v) in r.iter().enumerate().take(5) {
+                assert!(
+                    (v / (k * k) - 1.0).abs() < 0.25,
+                    "k {k}: octave {b} reads {v} ({r:?})"
+                );
+            }
+        }
+        let few: Vec<bool> = (0..n).map(|i| i < ERROR_SPECTRUM_MIN_CELLS - 1).collect();
+        let z = vec![0.0f32; n];
+        assert!(look_error_spectrum((&z, &z), (&se, &sw), &few, w, blur).is_none());
+    }
 }
