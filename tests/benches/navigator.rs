@@ -1,6 +1,8 @@
 //! Host speed of one full `Navigator` call (slope → SURF → match → MSAC → gate) on a 200 × 200
 //! DEM frame against a 512-feature tile. Scene: seeded analytic crater field; reference at 20 m,
-//! frame at 10 m rotated by 30°.
+//! frame at 10 m rotated by 30°. Three configurations: the host's (256 keypoints, no work
+//! budget), and the flight configuration (`nav_core::flight`: its workspace, 24 keypoints, the
+//! 20 M work budget) without and with a prior (σ 50 m, 2°, 2 % around the host's fix).
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use ground_sim::reference::tile::{GeoGrid, build_tile};
@@ -96,6 +98,44 @@ fn bench_navigator(c: &mut Criterion) {
             )
         })
     });
+    // What flies: the firmware's workspace and NavConfig::default()'s work budget.
+    let flight = Navigator::new(tile, NavConfig::default());
+    let mut fws = Box::new(nav_core::flight::Workspace::new());
+    let Ok(fix) = report.outcome else {
+        panic!("the bench frame must fix on the host");
+    };
+    let prior = nav_core::Prior {
+        center_tile_px: [fix.center_tile_px[0] as f32, fix.center_tile_px[1] as f32],
+        sigma_px: 50.0 / 20.0,
+        heading_rad: fix.heading_rad as f32,
+        heading_sigma_rad: 2f32.to_radians(),
+        scale: fix.similarity.scale as f32,
+        scale_sigma: 0.02,
+    };
+    for (name, prior) in [
+        ("navigator_flight_200x200_vs_512_tile", None),
+        ("navigator_flight_prior_200x200_vs_512_tile", Some(&prior)),
+    ] {
+        let r = flight
+            .locate_dem(&mut fws, &dem, prior)
+            .unwrap_or_else(|e| panic!("{e}"));
+        println!(
+            "{name}: {} keypoints, {} matches, {} inliers, {}",
+            r.features,
+            r.matches,
+            r.inliers,
+            if r.outcome.is_ok() { "fix" } else { "no fix" }
+        );
+        c.bench_function(name, |b| {
+            b.iter(|| {
+                black_box(
+                    flight
+                        .locate_dem(&mut fws, black_box(&dem), prior)
+                        .map(|r| r.inliers),
+                )
+            })
+        });
+    }
 }
 
 criterion_group!(benches, bench_navigator);
