@@ -74,6 +74,16 @@ pub fn band_powers(z: &[f64], w: usize, h: usize) -> [f64; BAND_EDGES.len()] {
     out
 }
 
+/// Coefficients of a `w × h` FFT grid in each octave band of [`BAND_EDGES`] (the DC term left
+/// out).
+pub fn band_counts(w: usize, h: usize) -> [usize; BAND_EDGES.len()] {
+    let mut out = [0; BAND_EDGES.len()];
+    for i in 1..w * h {
+        out[band_of(frequency(i, w, h))] += 1;
+    }
+    out
+}
+
 /// A `w × h` field of Gaussian noise with unit variance whose power spectrum is that of white
 /// noise blurred by a Gaussian of σ `blur_px` pixels, `exp(−(2π·blur·f)²)` (periodic across the
 /// grid's edges); white for `blur_px` 0. Reproducible from `seed`.
@@ -130,6 +140,10 @@ mod tests {
         assert_eq!(band_of(0.03), 0);
         assert_eq!(band_of(1.0 / 32.0), 1);
         assert_eq!(band_of(0.7), 5);
+        // Every coefficient but DC in one band; the coarsest of a 200² grid holds ≈ π·6.25².
+        let c = band_counts(200, 200);
+        assert_eq!(c.iter().sum::<usize>(), 200 * 200 - 1);
+        assert!((100..140).contains(&c[0]), "{c:?}");
     }
 
     #[test]

@@ -446,7 +446,7 @@ fn variance_levels(var: &[f64]) -> Vec<f64> {
 /// [`plausible_truth`]'s spectra on a hole-free `w × h` field `z`: the map's (mirrored at its
 /// edges), its power per frequency ring, and one white-noise field's, so that draws at several
 /// error variances share their randomness. The error is Gaussian-correlated, σ `blur_px`
-/// pixels (0: white). Memory during a draw: four complex grids of the mirrored size (the map's
+/// pixels (0: white), its power scaled per octave by `band_ratio` ([`ErrorModel`]). Memory during a draw: four complex grids of the mirrored size (the map's
 /// and the noise's spectra, the draw and the FFT's scratch) and a few real grids of the map's,
 /// ≈ 290 B per map cell (≈ 1.2 GB for a 2048² map).
 struct PosteriorSpectra {
@@ -836,6 +836,32 @@ mod tests {
             (rms_q - 1.0).abs() < 0.2,
             "calibrated draw − map rms {rms_q}"
         );
+        // The scaling lands in its own octave: four times the power in the coarsest (where the
+        // terrain dominates, so the draw departs from the map by the error drawn) and the
+        // others as they were.
+        let coarse = ErrorModel {
+            band_ratio: [4.0, 1.0, 1.0, 1.0, 1.0, 1.0],
+            ..e.clone()
+        };
+        let tc = as64(&plausible_truth(&map, &coarse, 3).unwrap());
+        let dpow = |t: &[f64]| {
+            let d: Vec<f64> = t
+                .iter()
+                .zip(&mz)
+                .map(|(a, b)| if b.is_finite() { a - b } else { 0.0 })
+                .collect();
+            crate::dem::spectrum::band_powers(&d, w, h)
+        };
+        let (p1, p4) = (dpow(&tz), dpow(&tc));
+        let gain = |b: usize| p4[b] / p1[b];
+        assert!(
+            (2.5..6.0).contains(&gain(0)),
+            "coarsest {} ({p1:?} → {p4:?})",
+            gain(0)
+        );
+        for b in 2..5 {
+            assert!((0.8..1.25).contains(&gain(b)), "octave {b}: {}", gain(b));
+        }
         // Reproducible; another seed, another draw.
         assert_eq!(
             plausible_truth(&map, &e, 3).unwrap().heights_m(),

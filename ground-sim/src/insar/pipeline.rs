@@ -398,16 +398,25 @@ pub struct LookFusion {
     /// the power of the east − west height difference over the cells valid in both, divided
     /// by the power the bound predicts for that difference (√(σ_e² + σ_w²) per cell times
     /// noise with the map's error correlation, masked alike). 1: the bound is right in that
-    /// octave; 2: the real error has twice its power. Errors both looks share do not show.
-    /// `None` with fewer than [`ERROR_SPECTRUM_MIN_CELLS`] cells valid in both.
+    /// octave; 2: the real error has twice its power. Errors both looks share do not show, nor
+    /// do the cells whose looks disagree beyond [`FUSE_CONSISTENCY_SIGMAS`] (dropped from the
+    /// map as well). An octave with fewer than [`ERROR_SPECTRUM_MIN_COEFFICIENTS`] Fourier
+    /// coefficients on the grid (the coarsest, on a small map), or with no power on either
+    /// side, reads 1: not measured, the bound taken as it is. `None` with fewer than
+    /// [`ERROR_SPECTRUM_MIN_CELLS`] cells valid in both. For a map made in blocks: the
+    /// measuring blocks' ratios weighted by the cells they own.
     #[serde(default)]
     pub error_spectrum_ratio: Option<[f64; crate::dem::spectrum::BAND_EDGES.len()]>,
 }
 
 /// Least cells valid in both looks for [`LookFusion::error_spectrum_ratio`].
 pub const ERROR_SPECTRUM_MIN_CELLS: usize = 1024;
-/// Draws of the bound's noise averaged for the ratio's denominator (each octave of a 200²
-/// map holds ≥ 100 coefficients, so one draw is within ≈ 10 %; four, ≈ 5 %).
+/// Least Fourier coefficients an octave needs on the grid for its ratio to be measured (half
+/// of them independent for a real field: 32 give a ratio within ≈ 25 %, 1σ, from the
+/// measured side's own scatter). The coarsest octave of a 200² map holds ≈ 120.
+pub const ERROR_SPECTRUM_MIN_COEFFICIENTS: usize = 64;
+/// Draws of the bound's noise averaged for the ratio's denominator (the measured side's
+/// scatter, ≈ 13 % in the coarsest octave of a 200² map, is not averaged away).
 const ERROR_SPECTRUM_DRAWS: u64 = 4;
 
 /// [`LookFusion::error_spectrum_ratio`] from the two looks' heights and bounds on one grid
@@ -454,9 +463,14 @@ fn look_error_spectrum(
             *a += b / ERROR_SPECTRUM_DRAWS as f64;
         }
     }
+    let counts = crate::dem::spectrum::band_counts(w, h);
     Some(core::array::from_fn(|b| {
         let r = measured[b] / model[b];
-        if r.is_finite() && r > 0.0 { r } else { 1.0 }
+        if r.is_finite() && r > 0.0 && counts[b] >= ERROR_SPECTRUM_MIN_COEFFICIENTS {
+            r
+        } else {
+            1.0
+        }
     }))
 }
 
