@@ -84,23 +84,22 @@ pub fn band_counts(w: usize, h: usize) -> [usize; BAND_EDGES.len()] {
     out
 }
 
+/// Draw a standard normal variate (Box–Muller; one per call keeps the stream simple).
+pub(crate) fn normal(rng: &mut impl rand::RngExt) -> f64 {
+    let u1: f64 = rng.random::<f64>().max(f64::MIN_POSITIVE);
+    let u2: f64 = rng.random();
+    (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+}
+
 /// A `w × h` field of Gaussian noise with unit variance whose power spectrum is that of white
 /// noise blurred by a Gaussian of σ `blur_px` pixels, `exp(−(2π·blur·f)²)` (periodic across the
 /// grid's edges); white for `blur_px` 0. Reproducible from `seed`.
 pub fn correlated_noise(w: usize, h: usize, blur_px: f64, seed: u64) -> Vec<f64> {
-    use rand::{RngExt, SeedableRng};
+    use rand::SeedableRng;
     let n = w * h;
     let mut rng = rand_pcg::Pcg64::seed_from_u64(seed);
     let mut c: Vec<Complex64> = (0..n)
-        .map(|_| {
-            // Box–Muller.
-            let u1: f64 = rng.random::<f64>().max(f64::MIN_POSITIVE);
-            let u2: f64 = rng.random();
-            Complex64::new(
-                (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos(),
-                0.0,
-            )
-        })
+        .map(|_| Complex64::new(normal(&mut rng), 0.0))
         .collect();
     if n == 0 {
         return Vec::new();

@@ -56,12 +56,7 @@ pub struct CampaignSpec {
     pub host_time: bool,
 }
 
-/// Draw a standard normal variate (Box–Muller; one per call keeps the stream simple).
-pub(crate) fn normal(rng: &mut impl RngExt) -> f64 {
-    let u1: f64 = rng.random::<f64>().max(f64::MIN_POSITIVE);
-    let u2: f64 = rng.random();
-    (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
-}
+pub(crate) use crate::dem::spectrum::normal;
 
 /// A prior around the truth `pose` with `spec`'s errors, in the tile's pixel axes.
 pub fn prior_around(
