@@ -71,6 +71,12 @@ pub struct Args {
     /// adds its SAR time). Not with `--slc-dir`.
     #[arg(long, default_value_t = 1)]
     pub passes: usize,
+    /// A second, longer baseline, m (0 = none): its interferogram's heights replace the
+    /// radar's own where they agree and are better (its cycles chosen against the short map;
+    /// the same ground seen through its own receivers; its SAR time added; docs/insar.md, "A
+    /// second, longer baseline"). Not with `--slc-dir`.
+    #[arg(long, default_value_t = 0.0)]
+    pub long_baseline_m: f64,
     /// Radar parameters (the first `--pol` is the InSAR channel, default HH). The default is
     /// the mission design with thermal noise at NESZ −25 dB; `--radar paper` gives the paper's
     /// noise-free model, `--no-noise` removes the thermal noise only.
@@ -158,11 +164,13 @@ pub fn run_chain(a: &Args) -> anyhow::Result<Outcome> {
         shadow_below_median_db: a.shadow_below_median_db,
         prior_dem_cell_m: a.prior_dem_cell_m,
         passes: a.passes,
+        long_baseline_m: a.long_baseline_m,
         ..InsarConfig::default()
     }
     .with_radar(&sar);
     // Bad parameters are refused before any simulation.
     cfg.validate()?;
+    ground_sim::insar::pipeline::check_long_baseline(&sar, &cfg)?;
     let truth = read_geotiff(&a.dem).with_context(|| format!("reading {}", a.dem.display()))?;
     let mut ctx = RunContext {
         input_dem: Some(a.dem.clone()),
@@ -204,7 +212,15 @@ pub fn run_chain(a: &Args) -> anyhow::Result<Outcome> {
                 cfg.passes
             )
         }
-        None if a.looks() == LookDirections::Both || cfg.passes > 1 => {
+        Some(_) if cfg.long_baseline_m > 0.0 => {
+            anyhow::bail!(
+                "--long-baseline-m simulates its second pair itself; --slc-dir holds one pair (drop one of them)"
+            )
+        }
+        None if a.looks() == LookDirections::Both
+            || cfg.passes > 1
+            || cfg.long_baseline_m > 0.0 =>
+        {
             let run = run_from_dem_looks(&truth, &sar, pol, &cfg, !a.no_progress, a.looks())?;
             ctx.filled_nodata = run.filled_nodata;
             ctx.sar = Some(SarSummary::of(&run.pair));

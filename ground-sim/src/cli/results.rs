@@ -206,6 +206,8 @@ fn suite_section(
         "| scene | InSAR, no prior | InSAR, prior |\n|---|---|---|"
     )?;
     md.push_str(&success_rows(&report_paper, &all_cols[2..]));
+    // The option of a second, longer baseline, on both seeds beside the default radar.
+    long_baseline_section(md, a, go, [(&seed, &report), (&seed2, &report2)])?;
     writeln!(
         md,
         "\nThe navigability maps over all campaigns of each seed (frames called \"go\": how many, how many got a correct fix; agreement = outcomes predicted right). The footprint rule reads feature count, valid fraction and slope texture under the frame; the rehearsal flies the flight code against the reference with frames from a draw of the terrain given its own DEM and its reported error, in the campaign's prior mode (`ground_sim::evaluation::rehearsal`):\n\n| seed | tile | map | go frames | go success | agreement |\n|---|---|---|---|---|---|"
@@ -386,6 +388,108 @@ fn success_rows(report: &Value, cols: &[(&str, bool)]) -> String {
         md += &format!("| {name} | {} |\n", cells.join(" | "));
     }
     md
+}
+
+/// Second baseline of the radar option the suite is run with again ([`long_baseline_section`]).
+const SUITE_LONG_BASELINE_M: f64 = 128.0;
+
+/// The InSAR suite again with a second, [`SUITE_LONG_BASELINE_M`] baseline (`suite --kinds insar
+/// --long-baseline-m`), at both seeds, beside the default radar's rows of `defaults`
+/// (seed, that seed's suite report).
+fn long_baseline_section(
+    md: &mut String,
+    a: &Args,
+    go: &dyn Fn(&[&str]) -> anyhow::Result<()>,
+    defaults: [(&String, &Value); 2],
+) -> anyhow::Result<()> {
+    let trials = a.suite_trials.to_string();
+    let long = SUITE_LONG_BASELINE_M.to_string();
+    let mut reports = Vec::new();
+    for (sd, _) in defaults {
+        let dir = a.work.join(format!("suite-long-baseline-seed{sd}"));
+        go(&[
+            "suite",
+            "--out",
+            &dir.to_string_lossy(),
+            "--campaign-seed",
+            sd,
+            "--terrain-seed",
+            sd,
+            "--trials",
+            &trials,
+            "--kinds",
+            "insar",
+            "--long-baseline-m",
+            &long,
+            "--rehearsal-step-m",
+            "0",
+        ])?;
+        reports.push(read(&dir.join("suite.json"))?);
+    }
+    let (s1, s2) = (defaults[0].0, defaults[1].0);
+    writeln!(
+        md,
+        "\n### InSAR tiles with a second, {long} m baseline (`suite --kinds insar --long-baseline-m {long}`, seeds {s1} and {s2})\n\n\
+         The same scenes and frames as the tables above; each look's heights come from a second, {long} m interferogram wherever it agrees with the 32 m one and claims a smaller bound (docs/insar.md, \"A second, longer baseline\"; twice the SAR time). \
+         Each cell: seed {s1} / seed {s2}, {trials} frames per campaign; the default radar's figure in brackets.\n\n\
+         | scene | success, no prior | success, prior | position p95 (m), no prior | fixes within 3σ, no prior | mean NEES, no prior | height RMSE (m) |\n|---|---|---|---|---|---|---|"
+    )?;
+    let row = |rep: &Value, scene: &str, prior: bool| -> Option<Value> {
+        rep["rows"]
+            .as_array()?
+            .iter()
+            .find(|r| {
+                r["scene"] == scene
+                    && r["kind"] == "insar"
+                    && r["summary"]["prior"].is_null() != prior
+            })
+            .cloned()
+    };
+    let scene_of = |rep: &Value, scene: &str, key: &str| -> Option<f64> {
+        rep["scenes"]
+            .as_array()?
+            .iter()
+            .find(|s| s["scene"]["name"] == scene)?[key]
+            .as_f64()
+    };
+    let pct = |v: Option<f64>| v.map_or("–".into(), |x| format!("{:.1} %", 100.0 * x));
+    let num = |v: Option<f64>, d: usize| v.map_or("–".into(), |x| format!("{x:.d$}"));
+    for sc in reports[0]["scenes"].as_array().into_iter().flatten() {
+        let name = sc["scene"]["name"].as_str().unwrap_or("?");
+        let cell = |prior: bool, key: &str, fmt: &dyn Fn(Option<f64>) -> String| {
+            let pair = |reps: [&Value; 2]| {
+                reps.map(|r| fmt(row(r, name, prior).and_then(|x| x["summary"][key].as_f64())))
+                    .join(" / ")
+            };
+            format!(
+                "{} ({})",
+                pair([&reports[0], &reports[1]]),
+                pair([defaults[0].1, defaults[1].1])
+            )
+        };
+        let rmse = |reps: [&Value; 2]| {
+            reps.map(|r| num(scene_of(r, name, "insar_height_rmse_m"), 2))
+                .join(" / ")
+        };
+        writeln!(
+            md,
+            "| {name} | {} | {} | {} | {} | {} | {} ({}) |",
+            cell(false, "success_rate", &pct),
+            cell(true, "success_rate", &pct),
+            cell(false, "pos_err_p95_m", &|v| num(v, 2)),
+            cell(false, "within_3sigma_frac", &pct),
+            cell(false, "nees_mean", &|v| num(v, 2)),
+            rmse([&reports[0], &reports[1]]),
+            rmse([defaults[0].1, defaults[1].1]),
+        )?;
+    }
+    let false_fixes: u64 = reports
+        .iter()
+        .flat_map(|r| r["rows"].as_array().cloned().unwrap_or_default())
+        .map(|r| r["summary"]["false_fixes"].as_u64().unwrap_or(0))
+        .sum();
+    writeln!(md, "\nFalse fixes over these campaigns: {false_fixes}.")?;
+    Ok(())
 }
 
 fn read(p: &Path) -> anyhow::Result<Value> {
@@ -702,11 +806,15 @@ const DESCENT_MAPS: [(&str, &str); 3] = [
     ("plains", "smooth plains"),
 ];
 
-/// Maps the InSAR descents fly again with passes stacked (preset, label, passes): the one
-/// scene whose one-pass map misses the touchdown bars, with the mission option that closes
-/// most of the gap (a landing region mapped with more passes; docs/registration.md, session
-/// 38, for the other seeds). Not a default: the other maps meet the bars with one pass.
-const INSAR_DESCENT_STACKED: [(&str, &str, usize); 1] = [("plains", "smooth plains", 4)];
+/// Maps the InSAR descents fly again with a mission option (preset, label, passes stacked per
+/// look, second baseline m or 0): the one scene whose default map misses the touchdown bars,
+/// with the options that close the gap: a landing region mapped with more passes
+/// (docs/registration.md, session 38) or with a second, longer baseline (docs/insar.md,
+/// session 43). Not defaults: the other maps meet the bars with the default radar.
+const INSAR_DESCENT_OPTIONS: [(&str, &str, usize, f64); 2] = [
+    ("plains", "smooth plains", 4, 0.0),
+    ("plains", "smooth plains", 1, 128.0),
+];
 
 /// Header of every descent table, matching [`descent_row`]'s columns.
 const DESCENT_TABLE_HEAD: &str = "| map | aiding | hazard avoidance | runs | landing error p50 / p95 / max (m) | safe touchdowns | … where ≥ 50 % of the ground within 30 m of the target is safe (runs) | ground within 10 m of the targets safe | site from target p50 / p95 (m) | nav error RMS (m) | nav error at touchdown p95 (m) | fixes / offsets accepted | offset NEES mean | NEES in 95 % band (all / final) | mean NEES |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|";
@@ -734,19 +842,30 @@ fn insar_descent_section(
         md,
         "The same 16 km scenes, hops and seeds, the tile now made by `ground-sim insar` from each scene (the default radar: {}, radar seed {seed}), hazard avoidance on. Frames still come from the truth DEM. Here the map's own error (its height noise, and the blobs it puts a little off where the frames find them) moves every fix near the target alike, so the flyer carries it to the ground: the landing error to the spot aimed at stays small (the hazard map and the odometry are the flyer's own frames), while the navigation error at touchdown is the distance from the intended target's ground.{}\n",
         default_radar_words(),
-        INSAR_DESCENT_STACKED
+        INSAR_DESCENT_OPTIONS
             .iter()
-            .map(|(_, label, n)| format!(
-                " The rows marked \"{n} passes\" fly the {label} again on a map of {n} passes stacked per look (`insar --passes {n}`: {n}× the SAR time; the receiver noise averages over the passes, the speckle they share does not), the option for a landing region whose one-pass map misses the bars."
-            ))
+            .map(|&(_, label, n, b)| if b > 0.0 {
+                format!(
+                    " The rows marked \"second {b} m baseline\" fly the {label} again on a map whose heights come from a second, {b} m interferogram where it agrees with the 32 m one and is better (`insar --long-baseline-m {b}`: a third antenna or a formation, twice the SAR time; docs/insar.md)."
+                )
+            } else {
+                format!(
+                    " The rows marked \"{n} passes\" fly the {label} again on a map of {n} passes stacked per look (`insar --passes {n}`: {n}× the SAR time; the receiver noise averages over the passes, the speckle they share does not)."
+                )
+            })
             .collect::<String>()
     )?;
     writeln!(md, "{DESCENT_TABLE_HEAD}")?;
     let mut verdicts = Vec::new();
     let mut maps = Vec::new();
-    let one_pass = DESCENT_MAPS.iter().map(|&(p, l)| (p, l, 1usize));
-    for (preset, map_label, passes) in one_pass.chain(INSAR_DESCENT_STACKED) {
-        let (map_label, stack) = if passes > 1 {
+    let one_pass = DESCENT_MAPS.iter().map(|&(p, l)| (p, l, 1usize, 0.0));
+    for (preset, map_label, passes, long_m) in one_pass.chain(INSAR_DESCENT_OPTIONS) {
+        let (map_label, stack) = if long_m > 0.0 {
+            (
+                format!("{map_label}, InSAR, second {long_m} m baseline"),
+                format!("-lb{long_m}"),
+            )
+        } else if passes > 1 {
             (
                 format!("{map_label}, InSAR, {passes} passes"),
                 format!("-x{passes}"),
@@ -757,7 +876,7 @@ fn insar_descent_section(
         let map_label = map_label.as_str();
         let dem = w(&format!("{preset}16.tif"));
         let tile = w(&format!("{preset}16-insar{stack}"));
-        let passes_arg = passes.to_string();
+        let (passes_arg, long_arg) = (passes.to_string(), long_m.to_string());
         go(&[
             "insar",
             "--dem",
@@ -768,6 +887,8 @@ fn insar_descent_section(
             &seed,
             "--passes",
             &passes_arg,
+            "--long-baseline-m",
+            &long_arg,
             "--no-progress",
         ])?;
         let r = read(&Path::new(&tile).join("report.json"))?;

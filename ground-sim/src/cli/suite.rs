@@ -68,6 +68,9 @@ pub struct Args {
     /// independent per pass, the same ground; each pass adds its SAR time).
     #[arg(long, default_value_t = 1)]
     pub passes: usize,
+    /// A second, longer baseline for the InSAR tiles, m (0 = none; `insar --long-baseline-m`).
+    #[arg(long, default_value_t = 0.0)]
+    pub long_baseline_m: f64,
     /// Kernel of the InSAR tiles' DEM filter, at its default σ (`quadratic`: the local
     /// quadratic fit at 2 px; docs/insar.md, "A filter without curvature bias").
     #[arg(long, value_enum, default_value_t = ground_sim::insar::InsarConfig::default().dem_filter)]
@@ -119,9 +122,13 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
     }
     let passes = ground_sim::insar::InsarConfig {
         passes: a.passes,
+        long_baseline_m: a.long_baseline_m,
         ..Default::default()
     };
     passes.validate()?;
+    if a.long_baseline_m > 0.0 && !a.kinds.contains(&TileKind::Insar) {
+        bail!("--long-baseline-m is a radar option of the InSAR tiles: give --kinds insar too");
+    }
     if a.passes > 1 && !a.kinds.contains(&TileKind::Insar) {
         bail!("--passes stacks the radar's passes of the InSAR tiles: give --kinds insar too");
     }
@@ -170,6 +177,7 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         ..Default::default()
     };
     let (radar, polarisation) = super::insar::radar_config(&a.radar)?;
+    ground_sim::insar::pipeline::check_long_baseline(&radar, &passes)?;
     let spec = SuiteSpec {
         trials,
         seed: a.campaign_seed,
@@ -182,6 +190,7 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         polarisation,
         looks: super::insar::looks_or_preset(a.looks, &a.radar),
         passes: a.passes,
+        long_baseline_m: a.long_baseline_m,
         dem_filter: a.dem_filter,
         fill_tile_holes: !a.keep_tile_holes,
         navmap: NavmapThresholds::default(),

@@ -216,6 +216,7 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
             polarisation: Polarisation::HH,
             looks,
             passes,
+            long_baseline_m: 0.0,
             dem_filter: Default::default(),
             fill_tile_holes: ground_sim::insar::InsarConfig::default().fill_tile_holes,
             navmap: NavmapThresholds::default(),

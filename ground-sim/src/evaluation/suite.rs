@@ -192,6 +192,9 @@ pub struct SuiteSpec {
     pub looks: LookDirections,
     /// Passes of one track stacked per look ([`crate::insar::InsarConfig::passes`]; 1 = one).
     pub passes: usize,
+    /// A second, longer baseline of the InSAR tiles, m ([`crate::insar::InsarConfig::long_baseline_m`];
+    /// 0 = none).
+    pub long_baseline_m: f64,
     /// Kernel of the InSAR chain's DEM filter, at its default σ
     /// ([`crate::insar::pipeline::DemFilterKind::default_sigma_px`]).
     pub dem_filter: crate::insar::pipeline::DemFilterKind,
@@ -347,6 +350,7 @@ pub fn run_scene(
                 let cfg = InsarConfig {
                     pixel_m: spec.reference_pixel_m,
                     passes: spec.passes,
+                    long_baseline_m: spec.long_baseline_m,
                     dem_filter: spec.dem_filter,
                     dem_filter_sigma_px: spec.dem_filter.default_sigma_px(),
                     fill_tile_holes: spec.fill_tile_holes,
@@ -695,11 +699,16 @@ fn go_cell(score: Option<&NavmapScore>) -> String {
 /// The suite's table as Markdown: one row per campaign.
 pub fn table_markdown(r: &SuiteReport) -> String {
     let mut s = format!(
-        "{} frames per campaign, campaign seed {}, navigator budget {}; InSAR tiles: {}{}.\n\n",
+        "{} frames per campaign, campaign seed {}, navigator budget {}; InSAR tiles: {}{}{}.\n\n",
         r.spec.trials,
         r.spec.seed,
         r.spec.budget.label(),
         radar_words(&r.spec.radar, r.spec.looks, r.spec.passes),
+        if r.spec.long_baseline_m > 0.0 {
+            format!(", a second {} m baseline fused in", r.spec.long_baseline_m)
+        } else {
+            String::new()
+        },
         match r.spec.dem_filter {
             crate::insar::pipeline::DemFilterKind::Gaussian => String::new(),
             k => format!(", DEM filter {k:?} at {} px", k.default_sigma_px()).to_lowercase(),

@@ -26,6 +26,7 @@ use anyhow::{Context, bail, ensure};
 use serde::{Deserialize, Serialize};
 
 use super::accuracy::window_truth;
+use super::baselines::BaselineFusion;
 use super::cycles::coarse_prior;
 use super::geocode::{OutputGrid, label};
 use super::geometry::PairGeometry;
@@ -261,6 +262,9 @@ pub struct BlockRecord {
     pub insar_s: f64,
     /// With both look directions: how the block's two passes were fused.
     pub look_fusion: Option<LookFusion>,
+    /// With a long baseline: how it entered the block's map, per look (east first).
+    #[serde(default)]
+    pub baseline_fusion: Vec<BaselineFusion>,
 }
 
 /// Settings of a blocked run, shared by every block.
@@ -385,6 +389,25 @@ fn run_pass(
             simulate_with(&sdem, job.sar, &opts).with_context(|| format!("simulating {what}"))
         })
         .collect::<anyhow::Result<Vec<_>>>()?;
+    // The long pair, if any: the same ground through its own receivers.
+    let long_sar = crate::insar::baselines::long_radar(job.sar, job.cfg.long_baseline_m);
+    let long_passes = (0..job.cfg.passes.max(1))
+        .filter(|_| job.cfg.long_baseline_m > 0.0)
+        .map(|k| {
+            let opts = SimOptions {
+                progress: job.progress,
+                scene: Some(SceneFrame {
+                    centre_m: centre,
+                    mesh_offset,
+                    noise_seed,
+                }),
+                noise_seed: Some(crate::insar::baselines::long_noise_seed(noise_seed, k)),
+                ..SimOptions::default()
+            };
+            simulate_with(&sdem, &long_sar, &opts)
+                .with_context(|| format!("simulating {what}, long baseline"))
+        })
+        .collect::<anyhow::Result<Vec<_>>>()?;
     drop(sdem);
     let pairs = slc_pairs(&passes, job.pol)?;
     let pair = &passes[0];
@@ -399,8 +422,19 @@ fn run_pass(
     grid.y0_m += origin[1];
     let prior = (job.cfg.prior_dem_cell_m > 0.0)
         .then(|| coarse_prior(&truth_grid, job.cfg.prior_dem_cell_m));
-    let product = process_stack(&pairs, &grid, job.cfg, prior.as_deref())
+    let mut product = process_stack(&pairs, &grid, job.cfg, prior.as_deref())
         .with_context(|| format!("processing {what}"))?;
+    let mut timings = stack_timings(&passes);
+    if !long_passes.is_empty() {
+        crate::insar::baselines::add_long_baseline(
+            &mut product,
+            &slc_pairs(&long_passes, job.pol)?,
+            prior.as_deref(),
+            job.cfg,
+        )
+        .with_context(|| format!("processing {what}, long baseline"))?;
+        timings += &stack_timings(&long_passes);
+    }
     let (a1, g) = (slc(Antenna::A1)?, &product.geometry);
     let n = job.cfg.window.size as f64;
     let centre_r = g.range_m(0.5 * (a1.gates as f64 - 1.0));
@@ -409,8 +443,9 @@ fn run_pass(
     Ok(BlockPass {
         product,
         window_side_m,
-        // Every stacked pass's time; the facet counts are the track's (the same per pass).
-        timings: stack_timings(&passes),
+        // Every stacked pass's time (and the long pair's); the facet counts are the track's
+        // (the same per pass).
+        timings,
         facets: [pair.stats.facets, pair.stats.shadowed, pair.stats.layover],
         filled,
     })
@@ -478,6 +513,7 @@ pub fn run_block(job: &BlockJob<'_>, index: usize) -> anyhow::Result<BlockRecord
         filled_nodata: filled,
         insar_s: product.seconds,
         look_fusion,
+        baseline_fusion: product.baseline_fusion.clone(),
     };
     let dir = block_dir(job.out, index);
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
@@ -646,6 +682,54 @@ pub struct Mosaic {
     pub sar: SarSummary,
     /// Nodata heights filled in the input.
     pub filled_nodata: usize,
+}
+
+/// The blocks' long-baseline figures per look, weighted by their core cells (the median
+/// bounds too: a weighted mean of the blocks' medians). Empty when a block has none.
+fn fused_baselines(blocks: &[BlockProduct]) -> Vec<BaselineFusion> {
+    let Some(first) = blocks.first() else {
+        return Vec::new();
+    };
+    let looks = first.record.baseline_fusion.len();
+    if blocks
+        .iter()
+        .any(|b| b.record.baseline_fusion.len() != looks)
+    {
+        return Vec::new();
+    }
+    (0..looks)
+        .map(|k| {
+            let parts: Vec<(f64, BaselineFusion)> = blocks
+                .iter()
+                .map(|b| {
+                    let e = b.record.block.core;
+                    ((e.width() * e.height()) as f64, b.record.baseline_fusion[k])
+                })
+                .collect();
+            let total: f64 = parts.iter().map(|(n, _)| n).sum();
+            let mean = |f: &dyn Fn(&BaselineFusion) -> f64| {
+                parts.iter().map(|(n, l)| n * f(l)).sum::<f64>() / total.max(1.0)
+            };
+            BaselineFusion {
+                long_baseline_m: first.record.baseline_fusion[k].long_baseline_m,
+                long_ambiguity_height_m: mean(&|l| l.long_ambiguity_height_m),
+                long_mask: MaskFractions {
+                    valid: mean(&|l| l.long_mask.valid),
+                    layover: mean(&|l| l.long_mask.layover),
+                    shadow: mean(&|l| l.long_mask.shadow),
+                    low_coherence: mean(&|l| l.long_mask.low_coherence),
+                    outside: mean(&|l| l.long_mask.outside),
+                },
+                long_share: mean(&|l| l.long_share),
+                inconsistent: mean(&|l| l.inconsistent),
+                unverifiable: mean(&|l| l.unverifiable),
+                median_bound_m: [
+                    mean(&|l| l.median_bound_m[0]),
+                    mean(&|l| l.median_bound_m[1]),
+                ],
+            }
+        })
+        .collect()
 }
 
 /// The blocks' look fusions as one, each block weighted by the cells it owns (its core: the
@@ -914,6 +998,7 @@ pub fn mosaic(job: &BlockJob<'_>) -> anyhow::Result<Mosaic> {
             / blocks.len() as f64,
         seconds: blocks.iter().map(|b| b.record.insar_s).sum(),
         look_fusion: fused_looks(&blocks),
+        baseline_fusion: fused_baselines(&blocks),
     };
     Ok(Mosaic {
         truth: TruthOnGrid {

@@ -15,7 +15,7 @@
 //! ambiguity. Here the valid pixels are cut into *patches* (4-connected valid pixels whose
 //! unwrapped phases differ by less than π: a slip line or a masked band separates them). For
 //! each patch of at least [`PATCH_MIN_PIXELS`], every whole-cycle shift within
-//! ±[`MAX_CYCLES`] is tried: each pixel's height (eq 17) and ground position give a residual
+//! ±[`max_cycles`] (at least [`MAX_CYCLES`]) is tried: each pixel's height (eq 17) and ground position give a residual
 //! against the prior there, and the shift with the smallest median |residual| wins. Smaller
 //! patches follow the shift most voting pixels took (0 when nothing voted).
 //!
@@ -32,8 +32,26 @@ use crate::dem::Dem;
 /// Least valid radar pixels of a patch for the prior to choose its cycles.
 pub const PATCH_MIN_PIXELS: usize = 25;
 
-/// Whole cycles tried either side of the unwrapper's choice.
+/// Whole cycles tried either side of the unwrapper's choice, at least.
 pub const MAX_CYCLES: i64 = 3;
+
+/// Height, m, the cycle search spans either side of the unwrapper's choice: three cycles of
+/// the 32 m boom (183 m each). A pair with a smaller height of ambiguity (a long baseline,
+/// 46 m at 128 m) tries proportionally more cycles ([`max_cycles`]), as the datum rule can
+/// leave it as many metres off.
+pub const CYCLE_SEARCH_SPAN_M: f64 = 550.0;
+
+/// Whole cycles to try either side for a pair whose height of ambiguity is `ambiguity_m`:
+/// [`CYCLE_SEARCH_SPAN_M`] of height, rounded, and never fewer than [`MAX_CYCLES`] (nor more
+/// than 64, for a bounded search).
+pub fn max_cycles(ambiguity_m: f64) -> i64 {
+    let k = (CYCLE_SEARCH_SPAN_M / ambiguity_m).round();
+    if k.is_finite() {
+        (k as i64).clamp(MAX_CYCLES, 64)
+    } else {
+        MAX_CYCLES
+    }
+}
 
 /// Most pixels of a patch that vote (a fixed stride through larger patches), for a bounded
 /// cost.
@@ -174,13 +192,15 @@ pub fn patches(unw: &[f64], valid: &[bool], width: usize) -> (Vec<u32>, Vec<usiz
 }
 
 /// Move each patch of `unw` (radar geometry, `width` wide, rad) by the whole cycles that best
-/// agree with `prior` (module docs). `place(i, phase)` gives pixel `i`'s SAR-frame ground
-/// position and height `(x, y, z)`, m, for an unwrapped phase.
+/// agree with `prior` (module docs), trying up to `max_cycles` either side ([`max_cycles`]).
+/// `place(i, phase)` gives pixel `i`'s SAR-frame ground position and height `(x, y, z)`, m,
+/// for an unwrapped phase.
 pub fn choose_cycles(
     unw: &mut [f64],
     valid: &[bool],
     width: usize,
     prior: &CyclePrior<'_>,
+    max_cycles: i64,
     place: impl Fn(usize, f64) -> (f64, f64, f64),
 ) -> CycleChoice {
     let tau = std::f64::consts::TAU;
@@ -201,7 +221,7 @@ pub fn choose_cycles(
         let voters: Vec<usize> = px.iter().step_by(stride).copied().collect();
         // (median |residual|, |k|, k): the smallest median wins, ties to the fewest cycles.
         let mut best: Option<(f64, i64, i64, Vec<f64>)> = None;
-        for k in -MAX_CYCLES..=MAX_CYCLES {
+        for k in -max_cycles..=max_cycles {
             let mut res: Vec<f64> = voters
                 .iter()
                 .filter_map(|&i| {
@@ -314,7 +334,7 @@ mod tests {
                 unw[i] -= tau;
             }
         }
-        let choice = choose_cycles(&mut unw, &valid, w, &p, place);
+        let choice = choose_cycles(&mut unw, &valid, w, &p, MAX_CYCLES, place);
         assert_eq!(choice.patches, 3, "{choice:?}");
         assert_eq!(choice.patches_shifted, 2, "{choice:?}");
         let med = choice.median_residual_m.unwrap();
@@ -346,7 +366,7 @@ mod tests {
                 valid[r * w + c] = (10..12).contains(&r) && (10..12).contains(&c);
             }
         }
-        let choice = choose_cycles(&mut unw, &valid, w, &p, place);
+        let choice = choose_cycles(&mut unw, &valid, w, &p, MAX_CYCLES, place);
         assert_eq!(
             (choice.patches, choice.patches_shifted),
             (1, 1),
@@ -358,7 +378,7 @@ mod tests {
         }
         // Nothing votes when every patch is small: nothing moves and no residual is claimed.
         let mut specks = vec![-tau; 4];
-        let c = choose_cycles(&mut specks, &[true; 4], 2, &p, place);
+        let c = choose_cycles(&mut specks, &[true; 4], 2, &p, MAX_CYCLES, place);
         assert_eq!(c.patches, 0);
         assert_eq!(c.median_residual_m, None);
         assert!(specks.iter().all(|&v| v == -tau));

@@ -20,14 +20,17 @@
 //! 7. [`accuracy`]: comparison with the truth DEM resampled to the same grid.
 //! 8. [`pipeline`]: everything above on a pair ([`process_pair`]), or from a DEM with the SAR
 //!    simulation inside ([`run_from_dem`]).
-//! 9. [`products`]: GeoTIFFs, the paper's Fig. 5 and 6 pictures, the reference folder (tile)
-//!    and `report.json`.
+//! 9. [`baselines`]: optionally a second, longer baseline whose heights replace the short
+//!    pair's where they agree and are better (`--long-baseline-m`).
+//! 10. [`products`]: GeoTIFFs, the paper's Fig. 5 and 6 pictures, the reference folder
+//!     (tile) and `report.json`.
 //!
 //! Frames and units: the SAR frame of [`crate::sar`] (metres; `x` along track = DEM rows,
 //! `y` ground range = DEM columns, `z` up); phases in radians; heights in metres above the
 //! lunar datum of the input DEM. Conventions and measured figures: `docs/insar.md`.
 
 pub mod accuracy;
+pub mod baselines;
 pub mod blocks;
 pub mod coreg;
 pub mod cycles;

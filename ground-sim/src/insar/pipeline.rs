@@ -10,7 +10,7 @@ use serde::{Deserialize, Serialize};
 use super::coreg::{
     ResidualOffset, estimate_residual_offset, predicted_offset_gates, resample_range,
 };
-use super::cycles::{CycleChoice, CyclePrior, choose_cycles, coarse_prior};
+use super::cycles::{CycleChoice, CyclePrior, choose_cycles, coarse_prior, max_cycles};
 pub use super::demfilter::{
     DemFilter, DemFilterKind, LookNoise, dem_filter_noise_factor, dem_filter_noise_factors,
     error_blur_m, filter_dem, gaussian_filter,
@@ -90,6 +90,10 @@ pub struct InsarConfig {
     /// same speckle: a conservative repeat of the track) with independent receiver noise; the
     /// orbit of every pass is known exactly (no orbit error is modelled).
     pub passes: usize,
+    /// A second, longer baseline, m, whose heights replace the short pair's where they agree
+    /// and are better ([`super::baselines`]; 0 = none, the default). It must be longer than
+    /// the radar's own baseline.
+    pub long_baseline_m: f64,
 }
 
 impl Default for InsarConfig {
@@ -112,6 +116,7 @@ impl Default for InsarConfig {
             hamming_alpha: 0.54,
             prior_dem_cell_m: DEFAULT_PRIOR_DEM_CELL_M,
             passes: 1,
+            long_baseline_m: 0.0,
         }
     }
 }
@@ -185,6 +190,12 @@ impl InsarConfig {
             return Err(InsarError::Input(format!(
                 "the prior DEM's cell must be ≥ 0 m (0 = no prior), got {}",
                 self.prior_dem_cell_m
+            )));
+        }
+        if !(self.long_baseline_m.is_finite() && self.long_baseline_m >= 0.0) {
+            return Err(InsarError::Input(format!(
+                "the long baseline must be ≥ 0 m (0 = none), got {}",
+                self.long_baseline_m
             )));
         }
         Ok(())
@@ -329,6 +340,9 @@ pub struct InsarProduct {
     /// east-looking pass, except `dem`, `coherence`, `crlb_m`, `labels` and `mask`, which are
     /// the fused map's).
     pub look_fusion: Option<LookFusion>,
+    /// With a long baseline ([`InsarConfig::long_baseline_m`]): how it entered the map, one
+    /// entry per look direction (east first); empty without one.
+    pub baseline_fusion: Vec<super::baselines::BaselineFusion>,
 }
 
 /// Look directions of an InSAR map (the commands' default is the radar preset's,
@@ -683,7 +697,7 @@ pub fn process_stack(
                 (g.azimuth_m(w.centre(k)), g.ground_y_m(r1, z), z)
             };
             let p = CyclePrior { heights_m, grid };
-            choose_cycles(&mut u.phase_rad, &valid, co, &p, place)
+            choose_cycles(&mut u.phase_rad, &valid, co, &p, max_cycles(hoa), place)
         });
         let good: Vec<f64> = (0..lo * co)
             .filter(|&i| labels[i] == label::VALID)
@@ -1017,6 +1031,7 @@ pub fn process_stack(
         coherence_mean_radar,
         seconds: t0.elapsed().as_secs_f64(),
         look_fusion: None,
+        baseline_fusion: Vec::new(),
     })
 }
 
@@ -1136,6 +1151,7 @@ pub fn run_from_dem(
     progress: bool,
 ) -> anyhow::Result<ChainRun> {
     cfg.validate()?;
+    check_long_baseline(sar, cfg)?;
     let (sdem, filled) = SarDem::from_dem(truth)?;
     let mut sar = sar.clone();
     sar.polarisations = vec![pol];
@@ -1152,9 +1168,31 @@ pub fn run_from_dem(
         })
         .collect::<Result<Vec<_>, _>>()?;
     let cfg = cfg.with_radar(&sar);
-    let (truth_on_grid, product) = process_simulated_stack(truth, &passes, pol, &cfg)?;
+    let (truth_on_grid, mut product) = process_simulated_stack(truth, &passes, pol, &cfg)?;
     // The run's SAR time is every pass's.
-    let timings = stack_timings(&passes);
+    let mut timings = stack_timings(&passes);
+    if cfg.long_baseline_m > 0.0 {
+        let long_sar = super::baselines::long_radar(&sar, cfg.long_baseline_m);
+        let long_passes = (0..cfg.passes.max(1))
+            .map(|k| {
+                let opts = SimOptions {
+                    progress,
+                    noise_seed: Some(super::baselines::long_noise_seed(sar.seed, k)),
+                    ..SimOptions::default()
+                };
+                simulate_with(&sdem, &long_sar, &opts)
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        let coarse = (cfg.prior_dem_cell_m > 0.0)
+            .then(|| coarse_prior(&truth_on_grid.grid, cfg.prior_dem_cell_m));
+        super::baselines::add_long_baseline(
+            &mut product,
+            &slc_pairs(&long_passes, pol)?,
+            coarse.as_deref(),
+            &cfg,
+        )?;
+        timings += &stack_timings(&long_passes);
+    }
     let mut pair = passes
         .into_iter()
         .next()
@@ -1198,6 +1236,17 @@ pub fn run_from_dem_looks(
     // The run's SAR time is both passes' (as a map in blocks reports it).
     east.pair.timings += &west.pair.timings;
     Ok(east)
+}
+
+/// Refuse a long baseline no longer than the radar's own (it would add noise, not remove it).
+pub fn check_long_baseline(sar: &SarConfig, cfg: &InsarConfig) -> InsarResult<()> {
+    if cfg.long_baseline_m > 0.0 && cfg.long_baseline_m <= sar.baseline_m {
+        return Err(InsarError::Input(format!(
+            "the long baseline ({} m) must be longer than the radar's baseline ({} m)",
+            cfg.long_baseline_m, sar.baseline_m
+        )));
+    }
+    Ok(())
 }
 
 /// Radar seed of the west-looking pass of a one-piece two-look run whose east-looking pass
@@ -1426,6 +1475,8 @@ pub fn fuse_looks(east: &mut InsarProduct, west: &InsarProduct) -> anyhow::Resul
         error_spectrum_ratio,
     };
     east.look_fusion = Some(fusion);
+    east.baseline_fusion
+        .extend(west.baseline_fusion.iter().copied());
     east.seconds += west.seconds;
     Ok(fusion)
 }

@@ -102,6 +102,10 @@ pub struct InsarReport {
     pub mask: MaskFractions,
     /// With two look directions (`--looks both`): each pass's mask and how they were fused.
     pub looks: Option<crate::insar::pipeline::LookFusion>,
+    /// With a long baseline (`--long-baseline-m`): how it entered the map, per look (east
+    /// first).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub baselines: Vec<crate::insar::baselines::BaselineFusion>,
     /// Pixels removed by the eq 20 test on the generated DEM.
     pub eq20_removed_pixels: usize,
     /// Pixels removed by the ray-traced shadow and layover of the generated DEM.
@@ -468,6 +472,7 @@ pub fn write_outputs(
         coregistration: p.coreg,
         unwrap: p.unwrap,
         looks: p.look_fusion,
+        baselines: p.baseline_fusion.clone(),
         mask: p.mask,
         eq20_removed_pixels: p.eq20_removed,
         geometry_removed_pixels: p.geometry_removed,

@@ -894,6 +894,67 @@ fn stacked_passes_shrink_the_height_error_as_the_crlb_says() {
     assert!(run_from_dem(&dem, &noisy, Polarisation::HH, &bad, false).is_err());
 }
 
+/// A second, longer baseline lowers the noise of gentle ground by about its length ratio, its
+/// bound stays the error's own size, and it takes nothing from a scene it cannot measure
+/// better; a long baseline no longer than the radar's is refused.
+#[test]
+fn a_long_baseline_lowers_the_noise_of_gentle_ground() {
+    // Gentle ground with some relief: a 3° tilt and low hills.
+    let t = 3f64.to_radians().tan();
+    let dem = scene(200, 5.0, |x, y| {
+        -2000.0 + t * x + 4.0 * (x / 90.0).sin() * (y / 130.0).cos()
+    });
+    let noisy = SarConfig {
+        noise_equivalent_sigma0_db: -15.0,
+        ..crate::sar::RadarPreset::Mission.config()
+    };
+    let run = |long_baseline_m: f64| {
+        let cfg = InsarConfig {
+            long_baseline_m,
+            ..InsarConfig::default()
+        };
+        let r = run_from_dem(&dem, &noisy, Polarisation::HH, &cfg, false).unwrap();
+        let a = compare(&r.product, &r.truth.grid, None).unwrap();
+        eprintln!(
+            "long baseline {long_baseline_m} m: rmse {:.3} m crlb {:.3} m valid {:.4} {:?}",
+            a.height_rmse_m, a.crlb_height_m, a.valid_fraction, r.product.baseline_fusion
+        );
+        (
+            a,
+            r.product.baseline_fusion,
+            r.product.unwrap.ambiguity_height_m,
+        )
+    };
+    let (short, none, hoa) = run(0.0);
+    let (long, fusion, _) = run(4.0 * noisy.baseline_m);
+    assert!(none.is_empty());
+    let f = fusion.first().expect("the long baseline's report");
+    // At this noise (10 dB above the mission's) the short bound reaches half the long pair's
+    // cycle on a few per cent of cells, which keep their short heights (measured 90 %).
+    assert!(f.long_share > 0.8, "{f:?}");
+    assert!(
+        (f.long_ambiguity_height_m / hoa - 0.25).abs() < 0.01,
+        "{f:?}"
+    );
+    // Four times the baseline: the noise falls by more than half (a quarter in phase terms;
+    // the surface's decorrelation grows with the baseline).
+    assert!(
+        long.height_rmse_m < 0.5 * short.height_rmse_m,
+        "{} against {}",
+        long.height_rmse_m,
+        short.height_rmse_m
+    );
+    assert!(long.valid_fraction >= short.valid_fraction - 1e-9);
+    let honest = long.height_rmse_m / long.crlb_height_m;
+    assert!((0.65..=1.1).contains(&honest), "error over CRLB {honest}");
+    // Refused before anything is simulated.
+    let bad = InsarConfig {
+        long_baseline_m: noisy.baseline_m,
+        ..InsarConfig::default()
+    };
+    assert!(run_from_dem(&dem, &noisy, Polarisation::HH, &bad, false).is_err());
+}
+
 #[test]
 fn the_frames_share_of_one_look_cells_is_the_worst_windows() {
     use super::pipeline::worst_window_share;
