@@ -20,9 +20,11 @@
 //! pairs share antenna A1 (its receiver noise and its speckle), so their errors are correlated
 //! and a mean that assumed them independent would claim too small a bound.
 //!
-//! The simulation flies the long pair over the same ground with the same radar seed (A1's
-//! echo is the same; A2 sits at the long baseline along the same tilt): a third antenna on the
-//! boom, or a second satellite in formation as TanDEM-X flies. Its SAR time is reported with
+//! The simulation flies the long pair over the same ground with the same radar seed (the same
+//! speckle; A2 sits at the long baseline along the same tilt) and draws the receiver noise of
+//! both its antennas anew: a second satellite in formation, as TanDEM-X flies. A third antenna
+//! on the boom would share A1's noise with the short pair, which makes the two errors more
+//! alike and the consistency check a little weaker; not modelled. Its SAR time is reported with
 //! the run's.
 
 use serde::{Deserialize, Serialize};
@@ -56,8 +58,8 @@ pub struct BaselineFusion {
     /// wrong cycle of the long pair (the short kept).
     pub unverifiable: f64,
     /// Median bound of the cells taken from the long pair ([`long_bound_m`]), m, and of the
-    /// same cells before.
-    pub median_bound_m: [f64; 2],
+    /// same cells before; `None` when it gave no cell.
+    pub median_bound_m: Option<[f64; 2]>,
 }
 
 /// The short map as the long pair's cycle prior: its heights where it has them, `coarse`
@@ -111,7 +113,8 @@ pub fn long_noise_seed(seed: u64, k: usize) -> u64 {
 const LONG_SALT: u64 = 0x6c6f_6e67;
 
 /// Bound, m, a cell taken from the long pair carries: its CRLB `crlb_m` with the chain's
-/// noise-free error ([`FUSE_MIN_BOUND_M`]) added in quadrature.
+/// noise-free error ([`FUSE_MIN_BOUND_M`]) added in quadrature. (The choice compares the raw
+/// CRLBs, the same order as with the floor on both; the short cells keep theirs without it.)
 ///
 /// Why: the CRLB holds the receiver noise and the surface's decorrelation, not the error the
 /// chain makes without them (window resolution, speckle centroids, the relief the window
@@ -208,7 +211,7 @@ pub fn fuse_baselines(
     }
     let median = |mut v: Vec<f64>| {
         v.sort_by(f64::total_cmp);
-        v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
+        v.get(v.len() / 2).copied()
     };
     short.dem = short.grid.raster(dem)?;
     short.coherence = short.grid.raster(coh)?;
@@ -222,7 +225,7 @@ pub fn fuse_baselines(
         long_share: share(taken),
         inconsistent: share(inconsistent),
         unverifiable: share(unverifiable),
-        median_bound_m: [median(after), median(before)],
+        median_bound_m: median(after).zip(median(before)).map(|(a, b)| [a, b]),
     };
     short.baseline_fusion.push(fusion);
     Ok(fusion)
@@ -270,5 +273,28 @@ mod tests {
             choose((10.0, 1.0), Some((10.0, 0.3)), f64::NAN),
             Choice::Long
         );
+    }
+}
+
+#[cfg(test)]
+mod report_tests {
+    use super::*;
+
+    /// A block whose long pair gave no cell has no median bound, and its record reads back
+    /// (a NaN would be written as `null` and refused on reading the block back).
+    #[test]
+    fn a_fusion_without_long_cells_reads_back() {
+        let f = BaselineFusion {
+            long_baseline_m: 128.0,
+            long_ambiguity_height_m: 46.0,
+            long_mask: MaskFractions::default(),
+            long_share: 0.0,
+            inconsistent: 0.0,
+            unverifiable: 1.0,
+            median_bound_m: None,
+        };
+        let text = serde_json::to_string(&f).unwrap();
+        let back: BaselineFusion = serde_json::from_str(&text).unwrap();
+        assert_eq!(back, f);
     }
 }

@@ -455,6 +455,7 @@ fn run_pass(
 /// west-looking pass over the mirrored scene, fused cell by cell as in one piece); write its
 /// rasters and `block.json` into [`block_dir`]. Returns the record.
 pub fn run_block(job: &BlockJob<'_>, index: usize) -> anyhow::Result<BlockRecord> {
+    crate::insar::pipeline::check_long_baseline(job.sar, job.cfg)?;
     let spec = job.layout.block(index)?;
     let k = cells_per_pixel(job.truth, job.cfg.pixel_m)?;
     let e = spec.extent;
@@ -685,7 +686,8 @@ pub struct Mosaic {
 }
 
 /// The blocks' long-baseline figures per look, weighted by their core cells (the median
-/// bounds too: a weighted mean of the blocks' medians). Empty when a block has none.
+/// bounds too: a weighted mean of the medians of the blocks that gave long cells). Empty when
+/// a block has none.
 fn fused_baselines(blocks: &[BlockProduct]) -> Vec<BaselineFusion> {
     let Some(first) = blocks.first() else {
         return Vec::new();
@@ -723,10 +725,17 @@ fn fused_baselines(blocks: &[BlockProduct]) -> Vec<BaselineFusion> {
                 long_share: mean(&|l| l.long_share),
                 inconsistent: mean(&|l| l.inconsistent),
                 unverifiable: mean(&|l| l.unverifiable),
-                median_bound_m: [
-                    mean(&|l| l.median_bound_m[0]),
-                    mean(&|l| l.median_bound_m[1]),
-                ],
+                median_bound_m: {
+                    // Over the blocks that gave long cells.
+                    let with: Vec<(f64, [f64; 2])> = parts
+                        .iter()
+                        .filter_map(|(n, l)| l.median_bound_m.map(|m| (*n, m)))
+                        .collect();
+                    let w: f64 = with.iter().map(|(n, _)| n).sum();
+                    (w > 0.0).then(|| {
+                        [0, 1].map(|k| with.iter().map(|(n, m)| n * m[k]).sum::<f64>() / w)
+                    })
+                },
             }
         })
         .collect()

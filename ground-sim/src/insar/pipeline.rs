@@ -198,6 +198,13 @@ impl InsarConfig {
                 self.long_baseline_m
             )));
         }
+        if self.long_baseline_m > 0.0 && !self.unwrap {
+            return Err(InsarError::Input(
+                "a long baseline needs its phase unwrapped (its cycles are chosen against the \
+                 short map): drop --no-unwrap or --long-baseline-m"
+                    .into(),
+            ));
+        }
         Ok(())
     }
 }

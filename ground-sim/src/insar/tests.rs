@@ -953,6 +953,13 @@ fn a_long_baseline_lowers_the_noise_of_gentle_ground() {
         ..InsarConfig::default()
     };
     assert!(run_from_dem(&dem, &noisy, Polarisation::HH, &bad, false).is_err());
+    // Its cycles need the unwrapped phase.
+    let wrapped = InsarConfig {
+        long_baseline_m: 4.0 * noisy.baseline_m,
+        unwrap: false,
+        ..InsarConfig::default()
+    };
+    assert!(run_from_dem(&dem, &noisy, Polarisation::HH, &wrapped, false).is_err());
 }
 
 #[test]
