@@ -846,7 +846,7 @@ fn insar_descent_section(
             .iter()
             .map(|&(_, label, n, b)| if b > 0.0 {
                 format!(
-                    " The rows marked \"second {b} m baseline\" fly the {label} again on a map whose heights come from a second, {b} m interferogram where it agrees with the 32 m one and is better (`insar --long-baseline-m {b}`: a third antenna or a formation, twice the SAR time; docs/insar.md)."
+                    " The rows marked \"second {b} m baseline\" fly the {label} again on a map whose heights come from a second, {b} m interferogram where it agrees with the 32 m one and is better (`insar --long-baseline-m {b}`: a second satellite in formation, twice the SAR time; docs/insar.md)."
                 )
             } else {
                 format!(
