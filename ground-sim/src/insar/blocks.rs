@@ -373,41 +373,40 @@ fn run_pass(
     drop(whole);
     // The block mesh on the scene mesh's lattice when the mesh divides the DEM pixel.
     let mesh_offset = MeshOffset::for_block(p, job.sar.mesh_spacing_m, r0, c0, scene.width());
+    // The passes of one track with `radar`, pass k's receiver noise seeded by `noise(k)` (None:
+    // the block's own seed).
+    let fly = |radar: &SarConfig, noise: &dyn Fn(usize) -> Option<u64>, pair: &str| {
+        (0..job.cfg.passes.max(1))
+            .map(|k| {
+                let opts = SimOptions {
+                    progress: job.progress,
+                    scene: Some(SceneFrame {
+                        centre_m: centre,
+                        mesh_offset,
+                        noise_seed,
+                    }),
+                    noise_seed: noise(k),
+                    ..SimOptions::default()
+                };
+                simulate_with(&sdem, radar, &opts)
+                    .with_context(|| format!("simulating {what}{pair}"))
+            })
+            .collect::<anyhow::Result<Vec<_>>>()
+    };
     // Stacked passes of the track: the block's own noise seed first, then one per pass.
-    let passes = (0..job.cfg.passes.max(1))
-        .map(|k| {
-            let opts = SimOptions {
-                progress: job.progress,
-                scene: Some(SceneFrame {
-                    centre_m: centre,
-                    mesh_offset,
-                    noise_seed,
-                }),
-                noise_seed: (k > 0).then(|| pass_noise_seed(noise_seed, k)),
-                ..SimOptions::default()
-            };
-            simulate_with(&sdem, job.sar, &opts).with_context(|| format!("simulating {what}"))
-        })
-        .collect::<anyhow::Result<Vec<_>>>()?;
+    let passes = fly(
+        job.sar,
+        &|k| (k > 0).then(|| pass_noise_seed(noise_seed, k)),
+        "",
+    )?;
     // The long pair, if any: the same ground through its own receivers.
-    let long_sar = crate::insar::baselines::long_radar(job.sar, job.cfg.long_baseline_m);
-    let long_passes = (0..job.cfg.passes.max(1))
-        .filter(|_| job.cfg.long_baseline_m > 0.0)
-        .map(|k| {
-            let opts = SimOptions {
-                progress: job.progress,
-                scene: Some(SceneFrame {
-                    centre_m: centre,
-                    mesh_offset,
-                    noise_seed,
-                }),
-                noise_seed: Some(crate::insar::baselines::long_noise_seed(noise_seed, k)),
-                ..SimOptions::default()
-            };
-            simulate_with(&sdem, &long_sar, &opts)
-                .with_context(|| format!("simulating {what}, long baseline"))
-        })
-        .collect::<anyhow::Result<Vec<_>>>()?;
+    let long_passes = if job.cfg.long_baseline_m > 0.0 {
+        let long_sar = crate::insar::baselines::long_radar(job.sar, job.cfg.long_baseline_m);
+        let seed = |k| Some(crate::insar::baselines::long_noise_seed(noise_seed, k));
+        fly(&long_sar, &seed, ", long baseline")?
+    } else {
+        Vec::new()
+    };
     drop(sdem);
     let pairs = slc_pairs(&passes, job.pol)?;
     let pair = &passes[0];

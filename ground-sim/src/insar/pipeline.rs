@@ -1164,32 +1164,28 @@ pub fn run_from_dem(
     sar.polarisations = vec![pol];
     // Pass 0 is the configuration's own; further passes of the same track see the same ground
     // (speckle) through their own receiver noise.
-    let passes = (0..cfg.passes.max(1))
-        .map(|k| {
-            let opts = SimOptions {
-                progress,
-                noise_seed: (k > 0).then(|| pass_noise_seed(sar.seed, k)),
-                ..SimOptions::default()
-            };
-            simulate_with(&sdem, &sar, &opts)
-        })
-        .collect::<Result<Vec<_>, _>>()?;
+    let fly = |radar: &SarConfig, noise: &dyn Fn(usize) -> Option<u64>| {
+        (0..cfg.passes.max(1))
+            .map(|k| {
+                let opts = SimOptions {
+                    progress,
+                    noise_seed: noise(k),
+                    ..SimOptions::default()
+                };
+                simulate_with(&sdem, radar, &opts)
+            })
+            .collect::<Result<Vec<_>, _>>()
+    };
+    let passes = fly(&sar, &|k| (k > 0).then(|| pass_noise_seed(sar.seed, k)))?;
     let cfg = cfg.with_radar(&sar);
     let (truth_on_grid, mut product) = process_simulated_stack(truth, &passes, pol, &cfg)?;
     // The run's SAR time is every pass's.
     let mut timings = stack_timings(&passes);
     if cfg.long_baseline_m > 0.0 {
         let long_sar = super::baselines::long_radar(&sar, cfg.long_baseline_m);
-        let long_passes = (0..cfg.passes.max(1))
-            .map(|k| {
-                let opts = SimOptions {
-                    progress,
-                    noise_seed: Some(super::baselines::long_noise_seed(sar.seed, k)),
-                    ..SimOptions::default()
-                };
-                simulate_with(&sdem, &long_sar, &opts)
-            })
-            .collect::<Result<Vec<_>, _>>()?;
+        let long_passes = fly(&long_sar, &|k| {
+            Some(super::baselines::long_noise_seed(sar.seed, k))
+        })?;
         let coarse = (cfg.prior_dem_cell_m > 0.0)
             .then(|| coarse_prior(&truth_on_grid.grid, cfg.prior_dem_cell_m));
         super::baselines::add_long_baseline(
