@@ -71,6 +71,10 @@ pub struct Args {
     /// A second, longer baseline for the InSAR tiles, m (0 = none; `insar --long-baseline-m`).
     #[arg(long, default_value_t = 0.0)]
     pub long_baseline_m: f64,
+    /// σ of the long pair's DEM filter, output pixels (`insar --long-filter-sigma-px`;
+    /// default the short pair's).
+    #[arg(long)]
+    pub long_filter_sigma_px: Option<f64>,
     /// Kernel of the InSAR tiles' DEM filter, at its default σ (`quadratic`: the local
     /// quadratic fit at 2 px; docs/insar.md, "A filter without curvature bias").
     #[arg(long, value_enum, default_value_t = ground_sim::insar::InsarConfig::default().dem_filter)]
@@ -123,6 +127,7 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
     let passes = ground_sim::insar::InsarConfig {
         passes: a.passes,
         long_baseline_m: a.long_baseline_m,
+        long_filter_sigma_px: a.long_filter_sigma_px,
         ..Default::default()
     };
     passes.validate()?;
@@ -191,6 +196,7 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         looks: super::insar::looks_or_preset(a.looks, &a.radar),
         passes: a.passes,
         long_baseline_m: a.long_baseline_m,
+        long_filter_sigma_px: a.long_filter_sigma_px,
         dem_filter: a.dem_filter,
         fill_tile_holes: !a.keep_tile_holes,
         navmap: NavmapThresholds::default(),

@@ -217,6 +217,7 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
             looks,
             passes,
             long_baseline_m: 0.0,
+            long_filter_sigma_px: None,
             dem_filter: Default::default(),
             fill_tile_holes: ground_sim::insar::InsarConfig::default().fill_tile_holes,
             navmap: NavmapThresholds::default(),

@@ -195,6 +195,9 @@ pub struct SuiteSpec {
     /// A second, longer baseline of the InSAR tiles, m ([`crate::insar::InsarConfig::long_baseline_m`];
     /// 0 = none).
     pub long_baseline_m: f64,
+    /// σ of the long pair's DEM filter, output pixels
+    /// ([`crate::insar::InsarConfig::long_filter_sigma_px`]; `None`: the short pair's).
+    pub long_filter_sigma_px: Option<f64>,
     /// Kernel of the InSAR chain's DEM filter, at its default σ
     /// ([`crate::insar::pipeline::DemFilterKind::default_sigma_px`]).
     pub dem_filter: crate::insar::pipeline::DemFilterKind,
@@ -351,6 +354,7 @@ pub fn run_scene(
                     pixel_m: spec.reference_pixel_m,
                     passes: spec.passes,
                     long_baseline_m: spec.long_baseline_m,
+                    long_filter_sigma_px: spec.long_filter_sigma_px,
                     dem_filter: spec.dem_filter,
                     dem_filter_sigma_px: spec.dem_filter.default_sigma_px(),
                     fill_tile_holes: spec.fill_tile_holes,
@@ -705,7 +709,14 @@ pub fn table_markdown(r: &SuiteReport) -> String {
         r.spec.budget.label(),
         radar_words(&r.spec.radar, r.spec.looks, r.spec.passes),
         if r.spec.long_baseline_m > 0.0 {
-            format!(", a second {} m baseline fused in", r.spec.long_baseline_m)
+            format!(
+                ", a second {} m baseline fused in{}",
+                r.spec.long_baseline_m,
+                r.spec
+                    .long_filter_sigma_px
+                    .map(|s| format!(" (its DEM filter {s} px)"))
+                    .unwrap_or_default()
+            )
         } else {
             String::new()
         },

@@ -735,9 +735,26 @@ fn fused_baselines(blocks: &[BlockProduct]) -> Vec<BaselineFusion> {
                         [0, 1].map(|k| with.iter().map(|(n, m)| n * m[k]).sum::<f64>() / w)
                     })
                 },
+                // The filter's variance mixes linearly: the blocks' root mean square σ.
+                long_filter_sigma_px: weighted(&parts, |l| l.long_filter_sigma_px.map(|s| s * s))
+                    .map(f64::sqrt),
+                long_crlb_filter_factor: weighted(&parts, |l| l.long_crlb_filter_factor),
             }
         })
         .collect()
+}
+
+/// Cell-weighted mean of `f` over the blocks that have it; `None` if none has.
+fn weighted(
+    parts: &[(f64, BaselineFusion)],
+    f: impl Fn(&BaselineFusion) -> Option<f64>,
+) -> Option<f64> {
+    let with: Vec<(f64, f64)> = parts
+        .iter()
+        .filter_map(|(n, l)| f(l).map(|v| (*n, v)))
+        .collect();
+    let w: f64 = with.iter().map(|(n, _)| n).sum();
+    (w > 0.0).then(|| with.iter().map(|(n, v)| n * v).sum::<f64>() / w)
 }
 
 /// The blocks' look fusions as one, each block weighted by the cells it owns (its core: the

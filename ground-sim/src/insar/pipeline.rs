@@ -94,6 +94,10 @@ pub struct InsarConfig {
     /// and are better ([`super::baselines`]; 0 = none, the default). It must be longer than
     /// the radar's own baseline.
     pub long_baseline_m: f64,
+    /// σ, output pixels, of the Gaussian mean that filters the long pair's DEM (0 = none;
+    /// only with the Gaussian kernel); `None` (the default): the short pair's
+    /// [`Self::dem_filter_sigma_px`] (`super::baselines::long_config`).
+    pub long_filter_sigma_px: Option<f64>,
 }
 
 impl Default for InsarConfig {
@@ -117,6 +121,7 @@ impl Default for InsarConfig {
             prior_dem_cell_m: DEFAULT_PRIOR_DEM_CELL_M,
             passes: 1,
             long_baseline_m: 0.0,
+            long_filter_sigma_px: None,
         }
     }
 }
@@ -184,6 +189,13 @@ impl InsarConfig {
         if !(sigma == 0.0 || (lo..=hi).contains(&sigma)) {
             return Err(InsarError::Input(format!(
                 "the DEM filter's σ must be 0 (none) or {lo}–{hi} px, got {sigma}"
+            )));
+        }
+        if let Some(long) = self.long_filter_sigma_px
+            && !(long == 0.0 || (lo..=hi).contains(&long))
+        {
+            return Err(InsarError::Input(format!(
+                "the long pair's DEM filter σ must be 0 (none) or {lo}–{hi} px, got {long}"
             )));
         }
         if !(self.prior_dem_cell_m.is_finite() && self.prior_dem_cell_m >= 0.0) {
@@ -350,6 +362,16 @@ pub struct InsarProduct {
     /// With a long baseline ([`InsarConfig::long_baseline_m`]): how it entered the map, one
     /// entry per look direction (east first); empty without one.
     pub baseline_fusion: Vec<super::baselines::BaselineFusion>,
+}
+
+impl InsarProduct {
+    /// Gaussian-equivalent σ, metres, the map's heights carry beyond their pixel's
+    /// ([`InsarConfig::inherent_smoothing_m`] of its chain). Where a long baseline replaced
+    /// cells with heights filtered at another width ([`super::baselines::long_config`]), the
+    /// variance is mixed by the share of cells each gave, averaged over the looks.
+    pub fn inherent_smoothing_m(&self) -> f64 {
+        super::baselines::mixed_inherent_smoothing_m(&self.config, &self.baseline_fusion)
+    }
 }
 
 /// Look directions of an InSAR map (the commands' default is the radar preset's,
@@ -1452,7 +1474,7 @@ pub fn fuse_looks(east: &mut InsarProduct, west: &InsarProduct) -> anyhow::Resul
     let blur_m = if east.config.dem_filter == DemFilterKind::Quadratic {
         east.error_blur_m
     } else {
-        east.config.inherent_smoothing_m()
+        east.inherent_smoothing_m()
     };
     let error_spectrum_ratio = look_error_spectrum(
         (east.dem.heights_m(), &wd),

@@ -256,7 +256,7 @@ pub fn write_outputs(
         MAX_TILE_FEATURES,
         Smoothing {
             target_m: crate::reference::INSAR_SMOOTHING_M,
-            inherent_m: p.config.inherent_smoothing_m(),
+            inherent_m: p.inherent_smoothing_m(),
             one_look_share: p.look_fusion.map_or(1.0, |f| f.one_look_share_for_frames()),
             height_noise_m: white_noise_m(p),
             fill_holes: p.config.fill_tile_holes,

@@ -908,9 +908,10 @@ fn a_long_baseline_lowers_the_noise_of_gentle_ground() {
         noise_equivalent_sigma0_db: -15.0,
         ..crate::sar::RadarPreset::Mission.config()
     };
-    let run = |long_baseline_m: f64| {
+    let run = |long_baseline_m: f64, long_filter_sigma_px: Option<f64>| {
         let cfg = InsarConfig {
             long_baseline_m,
+            long_filter_sigma_px,
             ..InsarConfig::default()
         };
         let r = run_from_dem(&dem, &noisy, Polarisation::HH, &cfg, false).unwrap();
@@ -923,12 +924,16 @@ fn a_long_baseline_lowers_the_noise_of_gentle_ground() {
             a,
             r.product.baseline_fusion,
             r.product.unwrap.ambiguity_height_m,
+            r.product.crlb_filter_factor,
         )
     };
-    let (short, none, hoa) = run(0.0);
-    let (long, fusion, _) = run(4.0 * noisy.baseline_m);
+    // Both pairs under the same 1 px mean (the default): the baseline's own effect.
+    let (short, none, hoa, short_factor) = run(0.0, None);
+    let (long, fusion, _, same_factor) = run(4.0 * noisy.baseline_m, None);
     assert!(none.is_empty());
     let f = fusion.first().expect("the long baseline's report");
+    assert_eq!(f.long_filter_sigma_px, Some(1.0));
+    assert_eq!(same_factor, short_factor);
     // At this noise (10 dB above the mission's) the short bound reaches half the long pair's
     // cycle on a few per cent of cells, which keep their short heights (measured 90 %).
     assert!(f.long_share > 0.8, "{f:?}");
@@ -946,6 +951,23 @@ fn a_long_baseline_lowers_the_noise_of_gentle_ground() {
     );
     assert!(long.valid_fraction >= short.valid_fraction - 1e-9);
     let honest = long.height_rmse_m / long.crlb_height_m;
+    assert!((0.65..=1.1).contains(&honest), "error over CRLB {honest}");
+    // The long pair under a narrower mean of its own: its bound grows (less noise averaged),
+    // the map's filter factor lies between the two pairs' (weighted by the bounds' power),
+    // and the bound still holds the error. On ground this gentle and at this noise (10 dB
+    // above the mission's) the narrower mean loses: it flattens little relief and keeps
+    // more noise.
+    let (narrow, fusion, _, fused_factor) = run(4.0 * noisy.baseline_m, Some(0.5));
+    let f = fusion.first().expect("the long baseline's report");
+    assert_eq!(f.long_filter_sigma_px, Some(0.5));
+    let long_factor = f.long_crlb_filter_factor.expect("the long pair's factor");
+    assert!(
+        fused_factor > short_factor && fused_factor < long_factor,
+        "{fused_factor} between {short_factor} and {long_factor}"
+    );
+    assert!(narrow.crlb_height_m > long.crlb_height_m);
+    assert!(narrow.height_rmse_m > long.height_rmse_m);
+    let honest = narrow.height_rmse_m / narrow.crlb_height_m;
     assert!((0.65..=1.1).contains(&honest), "error over CRLB {honest}");
     // Refused before anything is simulated.
     let bad = InsarConfig {
@@ -1412,4 +1434,42 @@ fn features_on_truth_counts_a_tiles_own_ground_and_little_of_another() {
     assert!(4 * on_other < n, "{on_other} of {n} on another ground");
     // Garbage in: a clear error, not a count.
     assert!(super::products::features_on_truth(&bytes[..10], &own, &surf, 50.0).is_err());
+}
+
+/// Crater-floor relief under noise: the error beyond the bound is the relief the chain's
+/// resolution flattens. Against the truth through the look window and the DEM filter, the
+/// error is the bound's (noise); against the 20 m truth it is larger.
+#[test]
+fn the_bound_holds_the_error_at_the_chains_own_resolution() {
+    // Gaussian mounds 20 m high, σ 50 m, every 250 m on a 1 km scene: the curvature of the
+    // dense floors' small craters.
+    let dem = scene(200, 5.0, |x, y| {
+        let (u, v) = ((x % 250.0) - 125.0, (y % 250.0) - 125.0);
+        -2000.0 + 20.0 * (-(u * u + v * v) / (2.0 * 50.0 * 50.0)).exp()
+    });
+    let radar = crate::sar::RadarPreset::Mission.config();
+    let run = run_from_dem(
+        &dem,
+        &radar,
+        Polarisation::HH,
+        &InsarConfig::default(),
+        false,
+    )
+    .unwrap();
+    let a = compare(&run.product, &run.truth.grid, Some(&run.truth.window)).unwrap();
+    eprintln!(
+        "rmse {:.3} window {:.3} resolution {:.3} crlb {:.3}",
+        a.height_rmse_m,
+        a.height_rmse_window_matched_m,
+        a.height_rmse_resolution_matched_m,
+        a.crlb_height_m
+    );
+    assert!(a.height_rmse_resolution_matched_m < a.height_rmse_window_matched_m);
+    assert!(a.height_rmse_window_matched_m < a.height_rmse_m);
+    assert!(
+        (0.8..=1.2).contains(&a.rmse_over_crlb_resolution_matched),
+        "{}",
+        a.rmse_over_crlb_resolution_matched
+    );
+    assert!(a.rmse_over_crlb > 1.2, "{}", a.rmse_over_crlb);
 }
