@@ -79,7 +79,8 @@ pub struct Args {
     pub long_baseline_m: f64,
     /// σ of the long pair's DEM filter (the Gaussian mean), output pixels (0 = none; default:
     /// the short pair's). 0.5 makes a better DEM of gentle cratered ground and tiles that
-    /// navigate worse (docs/insar.md, "The long pair's filter").
+    /// navigate worse (docs/insar.md, "The error at the chain's own resolution, and the long
+    /// pair's filter"). Only with `--long-baseline-m` and the Gaussian mean.
     #[arg(long)]
     pub long_filter_sigma_px: Option<f64>,
     /// Radar parameters (the first `--pol` is the InSAR channel, default HH). The default is

@@ -73,7 +73,9 @@ pub struct Accuracy {
     /// Height RMSE against the truth through the chain's whole resolution: the window-matched
     /// truth passed through the product's DEM filter (its `config`'s), m. What is left is
     /// the error the bound speaks of (noise); the rest of [`Self::height_rmse_m`] is relief
-    /// the chain flattens (a crater floor raised by `σ²/2·∇²h`), not noise.
+    /// the chain flattens (a crater floor raised by `σ²/2·∇²h`), not noise. With a long pair
+    /// at its own filter width (`InsarConfig::long_filter_sigma_px`) its cells were filtered
+    /// otherwise, and the figure is approximate there.
     pub height_rmse_resolution_matched_m: f64,
     /// [`Self::height_rmse_resolution_matched_m`] over [`Self::crlb_height_m`].
     pub rmse_over_crlb_resolution_matched: f64,

@@ -64,7 +64,8 @@ pub struct BaselineFusion {
     /// written before it was recorded (the short pair's then).
     #[serde(default)]
     pub long_filter_sigma_px: Option<f64>,
-    /// The long pair's [`InsarProduct::crlb_filter_factor`]; `None` as above.
+    /// The long pair's [`InsarProduct::crlb_filter_factor`] (no unit, 0–1: the DEM filter's
+    /// shrinking of the height noise's σ); `None` as above.
     #[serde(default)]
     pub long_crlb_filter_factor: Option<f64>,
 }
@@ -105,9 +106,10 @@ pub fn add_long_baseline(
 ///
 /// Why an option: the mean that halves the 32 m pair's noise flattens relief by `σ²/2·∇²h`,
 /// and the long pair's noise is four times smaller, so on gentle cratered ground a narrower
-/// mean makes a better DEM (at 0.5 px the dense floors' height RMSE −9 to −11 %, within 1.3×
+/// mean makes a better DEM (at 0.5 px the dense floors' height RMSE −3 to −12 %, within 1.3×
 /// the bound); but the tiles made from such maps navigate worse, so the default keeps the
-/// short pair's width (docs/insar.md, "The long pair's filter").
+/// short pair's width (docs/insar.md, "The error at the chain's own resolution, and the long
+/// pair's filter").
 pub fn long_config(cfg: &InsarConfig) -> InsarConfig {
     let mut long = *cfg;
     if let Some(s) = cfg.long_filter_sigma_px
@@ -126,16 +128,18 @@ pub fn mixed_inherent_smoothing_m(cfg: &InsarConfig, fusion: &[BaselineFusion]) 
     let short = cfg.inherent_smoothing_m();
     let mixed: Vec<f64> = fusion
         .iter()
-        .map(|f| {
-            let long = f.long_filter_sigma_px.map_or(short, |s| {
-                InsarConfig {
+        .map(|f| match f.long_filter_sigma_px {
+            // One width: the short pair's, exactly (no mixing round-off).
+            Some(s) if s != cfg.dem_filter_sigma_px => {
+                let long = InsarConfig {
                     dem_filter_sigma_px: s,
                     ..*cfg
                 }
-                .inherent_smoothing_m()
-            });
-            let share = f.long_share.clamp(0.0, 1.0);
-            (1.0 - share) * short * short + share * long * long
+                .inherent_smoothing_m();
+                let share = f.long_share.clamp(0.0, 1.0);
+                (1.0 - share) * short * short + share * long * long
+            }
+            _ => short * short,
         })
         .filter(|v| v.is_finite())
         .collect();
@@ -252,11 +256,10 @@ pub fn fuse_baselines(
         let lv = long.labels[i] == label::VALID && ld[i].is_finite() && ls[i].is_finite();
         let cycle_m = cycle_height_m(long, i % w.max(1));
         let choice = choose((dem[i], sig[i]), lv.then_some((ld[i], ls[i])), cycle_m);
-        let mut f = fs;
+        let f = if choice == Choice::Long { fl } else { fs };
         match choice {
             Choice::Long => {
                 taken += 1;
-                f = fl;
                 let bound = long_bound_m(ls[i]);
                 before.push(f64::from(sig[i]));
                 after.push(f64::from(bound));
@@ -375,12 +378,16 @@ mod filter_tests {
     /// pair's otherwise; the quadratic fit keeps its own.
     #[test]
     fn the_long_pair_has_its_own_filter_width() {
-        let same = InsarConfig::default();
+        let same = InsarConfig {
+            long_baseline_m: 128.0,
+            ..InsarConfig::default()
+        };
         assert_eq!(long_config(&same), same);
         let cfg = InsarConfig {
             long_filter_sigma_px: Some(0.5),
             ..same
         };
+        assert!(cfg.validate().is_ok());
         assert_eq!(long_config(&cfg).dem_filter_sigma_px, 0.5);
         assert_eq!(long_config(&cfg).filter().kind, DemFilterKind::Gaussian);
         let quadratic = InsarConfig {
@@ -389,6 +396,13 @@ mod filter_tests {
             ..cfg
         };
         assert_eq!(long_config(&quadratic).dem_filter_sigma_px, 2.0);
+        // Asked where it would do nothing (no long pair, or the quadratic fit): refused.
+        assert!(quadratic.validate().is_err());
+        let alone = InsarConfig {
+            long_baseline_m: 0.0,
+            ..cfg
+        };
+        assert!(alone.validate().is_err());
         // A width outside the filter's range is refused like the short pair's.
         let bad = InsarConfig {
             long_filter_sigma_px: Some(0.05),

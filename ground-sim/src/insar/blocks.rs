@@ -51,8 +51,10 @@ pub const DEFAULT_OVERLAP_CELLS: usize = 25;
 /// Version of the block files (`block.json`). 2: the height CRLB layer follows the DEM
 /// filter (`pipeline::dem_filter_noise_factor`), and the record carries that factor. 3: the
 /// DEM filter may be the local quadratic fit (`pipeline::DemFilterKind`, in the record's
-/// configuration), and the record carries the filtered noise's correlation length.
-pub const BLOCK_FORMAT_VERSION: u32 = 3;
+/// configuration), and the record carries the filtered noise's correlation length. 4: the
+/// configuration may give the long pair its own filter width, and the long baseline's record
+/// carries it (blocks of version 3 would be refused as made with other settings).
+pub const BLOCK_FORMAT_VERSION: u32 = 4;
 /// Folder of the block products inside an `insar` output folder.
 pub const BLOCKS_DIR: &str = "blocks";
 const BLOCK_JSON: &str = "block.json";

@@ -191,6 +191,15 @@ impl InsarConfig {
                 "the DEM filter's σ must be 0 (none) or {lo}–{hi} px, got {sigma}"
             )));
         }
+        if self.long_filter_sigma_px.is_some()
+            && !(self.long_baseline_m > 0.0 && self.dem_filter == DemFilterKind::Gaussian)
+        {
+            return Err(InsarError::Input(
+                "the long pair's DEM filter width needs a long baseline and the Gaussian mean \
+                 (--long-baseline-m, --dem-filter gaussian)"
+                    .into(),
+            ));
+        }
         if let Some(long) = self.long_filter_sigma_px
             && !(long == 0.0 || (lo..=hi).contains(&long))
         {
@@ -1500,6 +1509,21 @@ pub fn fuse_looks(east: &mut InsarProduct, west: &InsarProduct) -> anyhow::Resul
         error_spectrum_ratio,
     };
     east.look_fusion = Some(fusion);
+    // With the long pair at its own filter width each look's factor is its own cells' mix
+    // (`baselines::fuse_baselines`): the map's is the looks' mean. Under one width the two
+    // are the same chain's and the east's stays as it is.
+    if east.crlb_filter_factor != west.crlb_filter_factor
+        && east
+            .baseline_fusion
+            .iter()
+            .chain(&west.baseline_fusion)
+            .any(|f| {
+                f.long_filter_sigma_px
+                    .is_some_and(|s| s != east.config.dem_filter_sigma_px)
+            })
+    {
+        east.crlb_filter_factor = 0.5 * (east.crlb_filter_factor + west.crlb_filter_factor);
+    }
     east.baseline_fusion
         .extend(west.baseline_fusion.iter().copied());
     east.seconds += west.seconds;

@@ -1457,13 +1457,8 @@ fn the_bound_holds_the_error_at_the_chains_own_resolution() {
     )
     .unwrap();
     let a = compare(&run.product, &run.truth.grid, Some(&run.truth.window)).unwrap();
-    eprintln!(
-        "rmse {:.3} window {:.3} resolution {:.3} crlb {:.3}",
-        a.height_rmse_m,
-        a.height_rmse_window_matched_m,
-        a.height_rmse_resolution_matched_m,
-        a.crlb_height_m
-    );
+    // Measured: RMSE 2.28 m, 2.15 m through the window, 1.81 m with the filter too; bound
+    // 1.84 m.
     assert!(a.height_rmse_resolution_matched_m < a.height_rmse_window_matched_m);
     assert!(a.height_rmse_window_matched_m < a.height_rmse_m);
     assert!(
