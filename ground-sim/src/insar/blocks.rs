@@ -726,17 +726,10 @@ fn fused_baselines(blocks: &[BlockProduct]) -> Vec<BaselineFusion> {
                 long_share: mean(&|l| l.long_share),
                 inconsistent: mean(&|l| l.inconsistent),
                 unverifiable: mean(&|l| l.unverifiable),
-                median_bound_m: {
-                    // Over the blocks that gave long cells.
-                    let with: Vec<(f64, [f64; 2])> = parts
-                        .iter()
-                        .filter_map(|(n, l)| l.median_bound_m.map(|m| (*n, m)))
-                        .collect();
-                    let w: f64 = with.iter().map(|(n, _)| n).sum();
-                    (w > 0.0).then(|| {
-                        [0, 1].map(|k| with.iter().map(|(n, m)| n * m[k]).sum::<f64>() / w)
-                    })
-                },
+                // Over the blocks that gave long cells (both medians or neither).
+                median_bound_m: weighted(&parts, |l| l.median_bound_m.map(|m| m[0]))
+                    .zip(weighted(&parts, |l| l.median_bound_m.map(|m| m[1])))
+                    .map(|(a, b)| [a, b]),
                 // The filter's variance mixes linearly: the blocks' root mean square σ.
                 long_filter_sigma_px: weighted(&parts, |l| l.long_filter_sigma_px.map(|s| s * s))
                     .map(f64::sqrt),

@@ -1512,15 +1512,14 @@ pub fn fuse_looks(east: &mut InsarProduct, west: &InsarProduct) -> anyhow::Resul
     // With the long pair at its own filter width each look's factor is its own cells' mix
     // (`baselines::fuse_baselines`): the map's is the looks' mean. Under one width the two
     // are the same chain's and the east's stays as it is.
-    if east.crlb_filter_factor != west.crlb_filter_factor
-        && east
-            .baseline_fusion
-            .iter()
-            .chain(&west.baseline_fusion)
-            .any(|f| {
-                f.long_filter_sigma_px
-                    .is_some_and(|s| s != east.config.dem_filter_sigma_px)
-            })
+    if east
+        .baseline_fusion
+        .iter()
+        .chain(&west.baseline_fusion)
+        .any(|f| {
+            f.long_filter_sigma_px
+                .is_some_and(|s| s != east.config.dem_filter_sigma_px)
+        })
     {
         east.crlb_filter_factor = 0.5 * (east.crlb_filter_factor + west.crlb_filter_factor);
     }
