@@ -199,3 +199,44 @@ fn reference_error_adds_to_the_fix_covariance() {
     );
     assert_eq!(with.center_geo_m, bare.center_geo_m);
 }
+
+/// True matches that a map's local error moves by 1 tile px rms per axis (each its own draw),
+/// as an InSAR tile's keypoints are moved (docs/registration.md, "MSAC's inlier threshold and
+/// the fewest matches"), still form one consensus of at least the gate's 6 inliers under the
+/// default threshold, among as many random pairs; at the old 1.5 px most fall out of it.
+#[test]
+fn matches_moved_by_the_map_still_agree() {
+    let count = |threshold_px: f32| {
+        let cfg = MsacConfig {
+            threshold_px,
+            ..MsacConfig::default()
+        };
+        let mut enough = 0;
+        for seed in 0..40u64 {
+            let mut pts = scene(5000 + seed, 10, 10, 0.9);
+            let mut r = Pcg32::new(seed, 11);
+            // The true pairs are those the pose maps within 2 px (`scene`'s noise is 0.3 px).
+            let (s, c) = 0.9f64.sin_cos();
+            for p in pts.iter_mut() {
+                let (x, y) = (p.x as f64, p.y as f64);
+                let ex = 0.5 * (c * x - s * y) + 120.0 - p.tx as f64;
+                let ey = 0.5 * (s * x + c * y) + 60.0 - p.ty as f64;
+                if ex.hypot(ey) < 2.0 {
+                    p.tx += gauss(&mut r) as f32;
+                    p.ty += gauss(&mut r) as f32;
+                }
+            }
+            let mut inl = vec![false; pts.len()];
+            if msac(&pts, &mut inl, &cfg).is_some_and(|m| m.inliers >= 6) {
+                enough += 1;
+            }
+        }
+        enough
+    };
+    let (now, before) = (count(MsacConfig::default().threshold_px), count(1.5));
+    println!(
+        "10 true matches moved 1 px rms per axis + 10 random: >= 6 inliers in {now}/40 (1.5 px: {before}/40)"
+    );
+    assert!(now >= 36, "{now}/40");
+    assert!(before + 4 <= now, "{before}/40 at 1.5 px");
+}
