@@ -94,9 +94,10 @@ impl Default for MsacConfig {
             model: Model::Similarity,
             // A true match on an InSAR tile is off by the map's local error as well as the
             // keypoints' own: 1.5 px refused enough of them that frames with three or more
-            // true matches found no consensus. Over the terrain suite (seeds 1–3, no prior)
-            // 2.0 and 2.5 px fix more frames, 3.5 px fewer (wrong samples win), none falsely
-            // (docs/registration.md, "MSAC's inlier threshold and the fewest matches").
+            // true matches found no consensus. Over the terrain suite (seeds 1 and 2, no
+            // prior) 2.0 and 2.5 px fix more frames, 3.5 px fewer (wrong samples win), none
+            // falsely; seed 3, held out, agrees (docs/registration.md, "MSAC's inlier
+            // threshold and the fewest matches").
             threshold_px: 2.5,
             // 99 % confidence needs 573 samples at 20 % inliers; a bit more covers 99.9 % at 25 %.
             max_iterations: 600,
@@ -413,7 +414,7 @@ pub fn msac_counted(
         };
         // Scored in `f32` (the Cortex-M4's FPU; `f64` is software there, ≈ 0.5 k instructions
         // a point): transfer errors of tile coordinates below 2¹⁴ px are good to 10⁻³ px
-        // against a threshold of 2.5 px. The inliers and the final fit are judged in `f64`.
+        // against the inlier threshold. The inliers and the final fit are judged in `f64`.
         let mf = model.to_array().map(|v| v as f32);
         let [m1, n1, p1, m2, n2, p2] = mf;
         let mut cost = 0.0f32;
