@@ -92,11 +92,10 @@ impl Default for GateConfig {
             min_inliers_verified: 3,
             verify_min_ncc: 0.7,
             reject_contradicted: true,
-            // Equal to MSAC's default inlier threshold (`MsacConfig::threshold_px`, its own
-            // constant), so that it refuses no consensus of inliers alone: left at 1.5 px under
-            // a 2.5 px threshold it refused 14 right consensus of the suite's 16 200 frames
-            // (seeds 1–3, no prior) and no wrong one.
-            max_residual_rms_px: 2.5,
+            // MSAC's default inlier threshold, so that it refuses no consensus of inliers alone:
+            // left at 1.5 px under a 2.5 px threshold it refused 14 right consensus of the
+            // suite's 16 200 frames (seeds 1–3, no prior) and no wrong one.
+            max_residual_rms_px: crate::msac::MsacConfig::default().threshold_px,
             max_non_similar: 0.08,
             scale_min: 0.2,
             scale_max: 2.0,
