@@ -507,7 +507,7 @@ pub fn write_csv_trials(path: &Path, trials: &[usize], rows: &[TrnScore]) -> any
     );
     writeln!(
         csv,
-        "trial,x_m,y_m,heading_deg,pixel_m,fix,false_fix,features,matches,inliers,rotation_deg,heading_err_deg,scale,scale_truth,pos_err_m,err_east_m,err_north_m,center_err_px,reg_err_mean_px,reg_err_max_px,center_sigma_m,nees,heading_sigma_deg,time_ms,refined,ncc,refined_sigma_m,refine_iterations,refine_note,area_search,m4_instructions_est,budget_cut,no_fix_reason"
+        "trial,x_m,y_m,heading_deg,pixel_m,fix,false_fix,features,matches,inliers,rotation_deg,heading_err_deg,scale,scale_truth,pos_err_m,err_east_m,err_north_m,center_err_px,reg_err_mean_px,reg_err_max_px,center_sigma_m,nees,heading_sigma_deg,time_ms,refined,ncc,refined_sigma_m,refine_iterations,refine_rho,refine_note,area_search,m4_instructions_est,budget_cut,no_fix_reason"
     )?;
     let o = |v: Option<f64>| v.map_or(String::new(), |x| format!("{x:.6}"));
     for (i, r) in trials.iter().zip(rows) {
@@ -519,7 +519,7 @@ pub fn write_csv_trials(path: &Path, trials: &[usize], rows: &[TrnScore]) -> any
         });
         writeln!(
             csv,
-            "{i},{:.3},{:.3},{:.4},{:.4},{},{},{},{},{},{},{},{},{:.6},{},{},{},{},{},{},{},{},{},{:.3},{},{},{},{},{},{},{},{},{}",
+            "{i},{:.3},{:.3},{:.4},{:.4},{},{},{},{},{},{},{},{},{:.6},{},{},{},{},{},{},{},{},{},{:.3},{},{},{},{},{},{},{},{},{},{}",
             t.x_m,
             t.y_m,
             t.heading_rad.to_degrees(),
@@ -547,6 +547,7 @@ pub fn write_csv_trials(path: &Path, trials: &[usize], rows: &[TrnScore]) -> any
             o(r.ncc.map(f64::from)),
             o(r.refined_sigma_m),
             r.refine_iterations.map_or(String::new(), |n| n.to_string()),
+            o(r.refine_rho.map(f64::from)),
             r.refine_note.as_deref().unwrap_or(""),
             r.area_search,
             r.m4_instructions_est

@@ -55,6 +55,11 @@ pub struct TrnScore {
     /// Gauss–Newton updates the applied refinement made (`Refined::iterations`).
     #[serde(default)]
     pub refine_iterations: Option<u8>,
+    /// Lag-1 correlation ρ of the applied refinement's residuals along a row
+    /// (`Refined::correlation`, 0–0.9): it sets how much the refinement inflates its covariance,
+    /// so campaigns can check that inflation against the fixes' errors.
+    #[serde(default)]
+    pub refine_rho: Option<f32>,
     /// The work nav-core metered for the frame (`FrameReport::work`: estimated Cortex-M4
     /// instructions, `nav_core::cost`); campaigns fill it.
     #[serde(default)]
@@ -170,6 +175,7 @@ pub fn score(
             Some(Ok(r)) if f.refined => {
                 s.ncc = Some(r.ncc_after);
                 s.refine_iterations = Some(r.iterations);
+                s.refine_rho = Some(r.correlation);
                 let c = r.center_cov_tile_px2;
                 s.refined_sigma_m = Some((0.5 * (c[0][0] + c[1][1])).max(0.0).sqrt() * h.pixel_m());
             }
