@@ -178,13 +178,17 @@ fn insar_folder_works_with_trn_and_eval() {
         "{err}"
     );
     // The map's own error the tiles claim: a one-look map the whole blur term (0.08 × 22.4 m),
-    // the two-look map only its share of cells made by one look alone.
-    let sigma = |d: &Path| -> f64 {
-        let t: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(d.join("tile.json")).unwrap()).unwrap();
-        t["reference_sigma_m"][0].as_f64().unwrap()
+    // the two-look map only its share of cells made by one look alone; both add, in
+    // quadrature, the term of their height noise against their slope signal.
+    let summary = |d: &Path| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(d.join("tile.json")).unwrap()).unwrap()
     };
+    let sigma = |d: &Path| summary(d)["reference_sigma_m"][0].as_f64().unwrap();
+    let noise_term = |d: &Path| summary(d)["map_noise_sigma_m"].as_f64().unwrap();
     let (fused, one) = (sigma(&ins), sigma(&ins1));
-    assert!((one - 0.08 * 22.36).abs() < 0.01, "one look: {one}");
-    assert!(fused < 0.5 * one, "two looks: {fused} vs {one}");
+    let blur_one = (one * one - noise_term(&ins1).powi(2)).max(0.0).sqrt();
+    assert!((blur_one - 0.08 * 22.36).abs() < 0.01, "one look: {one}");
+    let blur_fused = (fused * fused - noise_term(&ins).powi(2)).max(0.0).sqrt();
+    assert!(blur_fused < 0.5 * blur_one, "two looks: {fused} vs {one}");
+    assert!(noise_term(&ins) > 0.0 && noise_term(&ins1) > 0.0);
 }
