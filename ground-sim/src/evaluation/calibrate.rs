@@ -8,6 +8,12 @@
 //! isotropic σ that brings the fixes' mean NEES to 2, and write it into the tile
 //! (`TileHeader::reference_sigma_m`), where nav-core adds it to every fix. The same procedure
 //! runs on every map; nothing is set by hand.
+//!
+//! The frames come from the map's own DEM, so the map's height noise is their "truth": a tile
+//! that claims height noise already carries its map-noise term
+//! (`reference::map_noise_sigma_m`, session 47), which only pads these fixes. The calibration
+//! then finds less frame-wide σ than it did before that term, often none; what it measures is
+//! how the flyer's frames fit the map, not the map's error against the ground.
 
 use anyhow::{Result, bail};
 use indicatif::ProgressBar;

@@ -56,7 +56,7 @@ pub struct TileSummary {
     /// Of it, the frame-wide error measured by flying frames over the map (`tile
     /// --calibrate-frames`), 1σ per axis, metres; 0 when not calibrated.
     pub frame_wide_sigma_m: f64,
-    /// Of it, the error from the map's own height noise against its slope signal
+    /// Of `reference_sigma_m`, the error from the map's own height noise against its slope signal
     /// ([`map_noise_sigma_m`]), 1σ per axis, metres; 0 for a map without height noise.
     pub map_noise_sigma_m: f64,
     /// Of the terrain smoothing, the σ applied by the tile builder, metres (the rest the DEM
@@ -200,11 +200,11 @@ pub fn reference_sigma_m(inherent_m: f64, one_look_share: f64) -> [f32; 2] {
     [s as f32; 2]
 }
 
-/// How far, in units of the tile's terrain smoothing σ and per unit of the squared ratio of
-/// the map's slope noise to its slope signal, a frame's fix sits from the truth for the map's
-/// own height noise beyond what the fix's residuals show (the κ of [`map_noise_sigma_m`]).
+/// κ of [`map_noise_sigma_m`], dimensionless: the frame-wide fix error that the map's own height
+/// noise causes beyond what the fix's residuals show, per metre of the tile's terrain
+/// smoothing σ and per unit of (slope noise / slope signal)².
 ///
-/// Fitted (session 47) on pooled campaigns over 30 held-out 4 km scenes: plains, lola and
+/// Fitted (session 47) on pooled campaigns over 30 4 km scenes never used before: plains, lola and
 /// shoemaker at terrain and radar seeds 11–20, each mapped by the default radar and by the
 /// 128 m second baseline (`eval --trials 300 --seed s`, prior 50 m, 2°, 2 %), as the κ that
 /// brings each scene × radar pool's mean NEES nearest 2 (least squares in log NEES). The
@@ -218,7 +218,7 @@ pub const MAP_NOISE_SHIFT_PER_SMOOTHING: f64 = 1.77;
 /// of `pixel_m`, metres) leaves after a Gaussian smoothing of σ `smoothing_m` (metres), degrees
 /// (small-angle). Each gradient component of white noise of power `P` per unit area (m⁴),
 /// smoothed by a Gaussian of σ, has variance `P / (8π σ⁴)`; the magnitude sums two of them.
-/// 0 for no noise or no smoothing (nothing to predict from).
+/// 0 for no noise, and for no smoothing, where white noise has no finite slope to predict.
 pub fn map_slope_noise_deg(height_noise_m: f64, pixel_m: f64, smoothing_m: f64) -> f64 {
     let usable = |v: f64| v.is_finite() && v > 0.0;
     if !(usable(height_noise_m) && usable(pixel_m) && usable(smoothing_m)) {
@@ -234,12 +234,13 @@ pub fn map_slope_noise_deg(height_noise_m: f64, pixel_m: f64, smoothing_m: f64) 
 /// 1σ per axis, metres: [`MAP_NOISE_SHIFT_PER_SMOOTHING`] × `smoothing_m` × (g / s)², with g the
 /// slope noise of [`map_slope_noise_deg`] and s = `slope_rms_deg`, the RMS of the tile's own
 /// slope raster (degrees; the signal the frames register on). The ratio is held at 1 at most,
-/// so a tile whose slope is all noise claims a whole smoothing σ.
+/// so a tile whose slope is all noise, or has no valid slope (NaN), claims κ × `smoothing_m`
+/// (88.5 m at 50 m).
 ///
 /// Why the square: the map's slope is the magnitude of a noisy gradient, so its noise does not
 /// only scatter the residuals (which the refinement's covariance already counts) but lifts low
-/// slopes by about g²/2s, a distortion that looks like terrain and moves blobs alike over a
-/// frame. It matters where the signal is weak: on 4 km plains InSAR maps (s = 0.9–2.2°,
+/// slopes by about g²/4s (each gradient component carries g²/2), a distortion that looks like
+/// terrain and moves blobs alike over a frame. It matters where the signal is weak: on 4 km plains InSAR maps (s = 0.9–2.2°,
 /// g = 0.13–0.23°) it gives 0.33–4.1 m; on cratered scenes (s = 2.4–13°) 0.06–0.76 m. A
 /// truth-built tile (no height noise claimed) gets 0.
 pub fn map_noise_sigma_m(
@@ -395,7 +396,8 @@ pub fn write_reference(
 
 /// [`write_reference`] with a frame-wide error of `frame_wide_m` metres (1σ per axis) measured
 /// by flying frames over the map (`evaluation::calibrate`), added in quadrature to the blur
-/// term of [`reference_sigma_m`] in the tile's `reference_sigma_m`.
+/// term of [`reference_sigma_m`] and the map-noise term of [`map_noise_sigma_m`] in the tile's
+/// `reference_sigma_m`.
 pub fn write_reference_with(
     ref_dem: &Dem,
     dir: &Path,
@@ -559,7 +561,7 @@ mod tests {
         assert!((plains / rugged - (5.0f64 / 1.5).powi(2)).abs() < 1e-9);
         let expected = MAP_NOISE_SHIFT_PER_SMOOTHING * 50.0 * (g / 1.5).powi(2);
         assert!((plains - expected).abs() < 1e-12);
-        // A slope that is all noise, or none to measure, claims a whole smoothing σ.
+        // A slope that is all noise, or none to measure, claims κ × the smoothing σ.
         let cap = MAP_NOISE_SHIFT_PER_SMOOTHING * 50.0;
         assert_eq!(map_noise_sigma_m(1.7, 20.0, 50.0, 0.5 * g), cap);
         assert_eq!(map_noise_sigma_m(1.7, 20.0, 50.0, f64::NAN), cap);
