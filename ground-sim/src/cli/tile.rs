@@ -54,10 +54,9 @@ pub struct Args {
     /// the tile's reference error (`ground_sim::reference::reference_sigma_m`).
     #[arg(long, default_value_t = 1.0)]
     pub one_look_share: f64,
-    /// The DEM's own height noise, 1σ per tile pixel (`--pixel-m`), metres, recorded in the tile (an InSAR DEM:
-    /// its `report.json` → `crlb_height_m` / `crlb_filter_factor`, which `insar` records
-    /// itself; 0 = none,
-    /// e.g. a truth DEM). The navigation filter treats the fix error it causes as the ground's,
+    /// The DEM's own height noise, 1σ per tile pixel (`--pixel-m`), metres, recorded in the
+    /// tile (an InSAR DEM: its `report.json` → `crlb_height_m` / `crlb_filter_factor`, which
+    /// `insar` records itself; 0 = none, e.g. a truth DEM). The navigation filter treats the fix error it causes as the ground's,
     /// shared by successive fixes (`nav_core::filter::map_noise_share`). It also adds to the
     /// tile's reference error the shift it causes against the tile's slope signal
     /// (`ground_sim::reference::map_noise_sigma_m`).

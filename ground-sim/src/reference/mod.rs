@@ -56,8 +56,8 @@ pub struct TileSummary {
     /// Of it, the frame-wide error measured by flying frames over the map (`tile
     /// --calibrate-frames`), 1σ per axis, metres; 0 when not calibrated.
     pub frame_wide_sigma_m: f64,
-    /// Of `reference_sigma_m`, the error from the map's own height noise against its slope signal
-    /// ([`map_noise_sigma_m`]), 1σ per axis, metres; 0 for a map without height noise.
+    /// Of `reference_sigma_m`, the error from the map's own height noise against its slope
+    /// signal ([`map_noise_sigma_m`]), 1σ per axis, metres; 0 for a map without height noise.
     pub map_noise_sigma_m: f64,
     /// Of the terrain smoothing, the σ applied by the tile builder, metres (the rest the DEM
     /// already had).
@@ -204,8 +204,8 @@ pub fn reference_sigma_m(inherent_m: f64, one_look_share: f64) -> [f32; 2] {
 /// noise causes beyond what the fix's residuals show, per metre of the tile's terrain
 /// smoothing σ and per unit of (slope noise / slope signal)².
 ///
-/// Fitted (session 47) on pooled campaigns over 30 4 km scenes never used before: plains, lola and
-/// shoemaker at terrain and radar seeds 11–20, each mapped by the default radar and by the
+/// Fitted (session 47) on pooled campaigns over 30 4 km scenes never used before: plains, lola
+/// and shoemaker at terrain and radar seeds 11–20, each mapped by the default radar and by the
 /// 128 m second baseline (`eval --trials 300 --seed s`, prior 50 m, 2°, 2 %), as the κ that
 /// brings each scene × radar pool's mean NEES nearest 2 (least squares in log NEES). The
 /// exponent 2 was chosen among 1, 2 and 2.5 because its κ came out the same (1.77) fitted on
@@ -240,9 +240,9 @@ pub fn map_slope_noise_deg(height_noise_m: f64, pixel_m: f64, smoothing_m: f64) 
 /// Why the square: the map's slope is the magnitude of a noisy gradient, so its noise does not
 /// only scatter the residuals (which the refinement's covariance already counts) but lifts low
 /// slopes by about g²/4s (each gradient component carries g²/2), a distortion that looks like
-/// terrain and moves blobs alike over a frame. It matters where the signal is weak: on 4 km plains InSAR maps (s = 0.9–2.2°,
-/// g = 0.13–0.23°) it gives 0.33–4.1 m; on cratered scenes (s = 2.4–13°) 0.06–0.76 m. A
-/// truth-built tile (no height noise claimed) gets 0.
+/// terrain and moves blobs alike over a frame. It matters where the signal is weak: on 4 km
+/// plains InSAR maps (s = 0.9–2.2°, g = 0.13–0.23°) it gives 0.33–4.1 m; on cratered scenes
+/// (s = 2.4–13°) 0.06–0.76 m. A truth-built tile (no height noise claimed) gets 0.
 pub fn map_noise_sigma_m(
     height_noise_m: f64,
     pixel_m: f64,
