@@ -781,6 +781,16 @@ impl<'t> Navigator<'t> {
         if result == Err(RefineError::OverBudget) {
             report.outcome = Err(NoFix::OverBudget);
         }
+        // A fix the refinement could not check stands on its features alone; the frame knows
+        // its own scale, and a consensus far from it is a wrong one. (A refined fix has had its
+        // scale pulled to the frame's, and a thin feature consensus off by more than this is
+        // often right where it matters, its position: the refinement rescues it.)
+        if let (Ok(fix), Some(s)) = (&report.outcome, info.scale)
+            && !fix.refined
+            && !(libm::fabs(fix.similarity.scale / s - 1.0) <= gate.max_scale_error as f64)
+        {
+            report.outcome = Err(NoFix::ScaleOutOfRange);
+        }
         report.refine = Some(result);
     }
 

@@ -341,6 +341,43 @@ fn prior_restricts_matching_to_the_footprint_and_still_fixes() {
     assert!(r.outcome.is_err(), "{:?}", r.outcome);
 }
 
+/// The frame states its pixel size, so a consensus far from the scale it implies is refused
+/// even where the refinement cannot check it (here switched off, as where the reference under
+/// the frame is mostly invalid): the same frame fixes when it states its pixel size, or one
+/// 5 % off, and is refused when it states one 25 % off.
+#[test]
+fn a_fix_far_from_the_frames_own_scale_is_refused() {
+    let (ref_slope, tile_bytes) = reference();
+    let tile = Tile::parse(&tile_bytes).unwrap();
+    let unchecked = NavConfig {
+        refine: nav_core::refine::RefineConfig {
+            enabled: false,
+            ..Default::default()
+        },
+        ..registration_config()
+    };
+    let nav = Navigator::new(tile, unchecked);
+    let mut ws = Box::new(Ws::new());
+    let (theta, s, t) = (30.0f64, 0.5, (128.0, 120.0));
+    let (sn, cs) = theta.to_radians().sin_cos();
+    let c = (FRAME_W as f64 - 1.0) / 2.0;
+    let frame = resample_slope(&ref_slope, REF_W, REF_W, FRAME_W, FRAME_W, |x, y| {
+        let (u, v) = (x - c, y - c);
+        (s * (cs * u - sn * v) + t.0, s * (sn * u + cs * v) + t.1)
+    });
+    let locate = |ws: &mut Ws, pixel_m: f32| {
+        let img = SlopeImage::new_checked(&frame, FRAME_W, FRAME_W, pixel_m).unwrap();
+        nav.locate_slope(ws, &img, None).unwrap().outcome
+    };
+    let stated = (REF_PX_M * s) as f32;
+    for pixel_m in [stated, stated * 1.05] {
+        let fix = locate(&mut ws, pixel_m).unwrap_or_else(|e| panic!("{pixel_m} m: {e:?}"));
+        assert!((fix.center_tile_px[0] - t.0).hypot(fix.center_tile_px[1] - t.1) < 1.0);
+        assert!(!fix.refined);
+    }
+    assert_eq!(locate(&mut ws, stated * 1.25), Err(NoFix::ScaleOutOfRange));
+}
+
 /// The dense check that confirms thin feature fixes must not confirm wrong ones: refinements
 /// started from wrong poses (6–60 reference px and up to ±10° off) either fail or, when they
 /// converge somewhere wrong, correlate far below the confirmation threshold.

@@ -807,14 +807,48 @@ const DESCENT_MAPS: [(&str, &str); 3] = [
 ];
 
 /// Maps the InSAR descents fly again with a mission option (preset, label, passes stacked per
-/// look, second baseline m or 0): the one scene whose default map misses the touchdown bars,
-/// with the options that close the gap: a landing region mapped with more passes
-/// (docs/registration.md, session 38) or with a second, longer baseline (docs/insar.md,
-/// session 43). Not defaults: the other maps meet the bars with the default radar.
-const INSAR_DESCENT_OPTIONS: [(&str, &str, usize, f64); 2] = [
+/// look, second baseline m or 0): the one scene whose default map misses the touchdown bars
+/// with a landing region mapped with more passes (docs/registration.md, session 38), and every
+/// descent scene with a second, longer baseline (docs/insar.md, session 43), the candidate
+/// mission design: not the default yet, so that its rows stand beside the default's.
+const INSAR_DESCENT_OPTIONS: [(&str, &str, usize, f64); 4] = [
     ("plains", "smooth plains", 4, 0.0),
+    ("lola", "LOLA-calibrated", 1, 128.0),
+    ("shoemaker", "Shoemaker-like floor", 1, 128.0),
     ("plains", "smooth plains", 1, 128.0),
 ];
+
+/// The sentence that says what the rows of the mission options in [`INSAR_DESCENT_OPTIONS`]
+/// flew: one per option kind, naming its scenes.
+fn descent_options_words() -> String {
+    let labels = |long: bool| {
+        let mut l: Vec<&str> = INSAR_DESCENT_OPTIONS
+            .iter()
+            .filter(|o| (o.3 > 0.0) == long)
+            .map(|o| o.1)
+            .collect();
+        l.dedup();
+        l.join(", ")
+    };
+    let mut words = String::new();
+    for &(_, _, n, b) in INSAR_DESCENT_OPTIONS.iter() {
+        let text = if b > 0.0 {
+            format!(
+                " The rows marked \"second {b} m baseline\" fly the {} again on a map whose heights come from a second, {b} m interferogram where it agrees with the 32 m one and is better (`insar --long-baseline-m {b}`: a second satellite in formation, twice the SAR time; docs/insar.md).",
+                labels(true)
+            )
+        } else {
+            format!(
+                " The rows marked \"{n} passes\" fly the {} again on a map of {n} passes stacked per look (`insar --passes {n}`: {n}× the SAR time; the receiver noise averages over the passes, the speckle they share does not).",
+                labels(false)
+            )
+        };
+        if !words.contains(&text) {
+            words.push_str(&text);
+        }
+    }
+    words
+}
 
 /// Header of every descent table, matching [`descent_row`]'s columns.
 const DESCENT_TABLE_HEAD: &str = "| map | aiding | hazard avoidance | runs | landing error p50 / p95 / max (m) | safe touchdowns | … where ≥ 50 % of the ground within 30 m of the target is safe (runs) | ground within 10 m of the targets safe | site from target p50 / p95 (m) | nav error RMS (m) | nav error at touchdown p95 (m) | fixes / offsets accepted | offset NEES mean | NEES in 95 % band (all / final) | mean NEES |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|";
@@ -842,18 +876,7 @@ fn insar_descent_section(
         md,
         "The same 16 km scenes, hops and seeds, the tile now made by `ground-sim insar` from each scene (the default radar: {}, radar seed {seed}), hazard avoidance on. Frames still come from the truth DEM. Here the map's own error (its height noise, and the blobs it puts a little off where the frames find them) moves every fix near the target alike, so the flyer carries it to the ground: the landing error to the spot aimed at stays small (the hazard map and the odometry are the flyer's own frames), while the navigation error at touchdown is the distance from the intended target's ground.{}\n",
         default_radar_words(),
-        INSAR_DESCENT_OPTIONS
-            .iter()
-            .map(|&(_, label, n, b)| if b > 0.0 {
-                format!(
-                    " The rows marked \"second {b} m baseline\" fly the {label} again on a map whose heights come from a second, {b} m interferogram where it agrees with the 32 m one and is better (`insar --long-baseline-m {b}`: a second satellite in formation, twice the SAR time; docs/insar.md)."
-                )
-            } else {
-                format!(
-                    " The rows marked \"{n} passes\" fly the {label} again on a map of {n} passes stacked per look (`insar --passes {n}`: {n}× the SAR time; the receiver noise averages over the passes, the speckle they share does not)."
-                )
-            })
-            .collect::<String>()
+        descent_options_words()
     )?;
     writeln!(md, "{DESCENT_TABLE_HEAD}")?;
     let mut verdicts = Vec::new();
