@@ -294,6 +294,22 @@ fn independently_rendered_frames_are_recovered() {
     assert_bars("rendered", &results);
 }
 
+/// A frame resampled from the reference under rotation `theta_deg`, scale `s` (reference px
+/// per frame px) and centre `t` (reference px), without noise.
+fn resampled_frame(
+    ref_slope: &[nav_core::SlopePx],
+    theta_deg: f64,
+    s: f64,
+    t: (f64, f64),
+) -> Vec<nav_core::SlopePx> {
+    let (sn, cs) = theta_deg.to_radians().sin_cos();
+    let c = (FRAME_W as f64 - 1.0) / 2.0;
+    resample_slope(ref_slope, REF_W, REF_W, FRAME_W, FRAME_W, |x, y| {
+        let (u, v) = (x - c, y - c);
+        (s * (cs * u - sn * v) + t.0, s * (sn * u + cs * v) + t.1)
+    })
+}
+
 #[test]
 fn prior_restricts_matching_to_the_footprint_and_still_fixes() {
     let (ref_slope, tile_bytes) = reference();
@@ -302,12 +318,7 @@ fn prior_restricts_matching_to_the_footprint_and_still_fixes() {
     let nav = Navigator::new(tile, registration_config());
     let mut ws = Box::new(Ws::new());
     let (theta, s, t) = (45.0f64, 0.5, (120.0, 140.0));
-    let (sn, cs) = theta.to_radians().sin_cos();
-    let c = (FRAME_W as f64 - 1.0) / 2.0;
-    let frame = resample_slope(&ref_slope, REF_W, REF_W, FRAME_W, FRAME_W, |x, y| {
-        let (u, v) = (x - c, y - c);
-        (s * (cs * u - sn * v) + t.0, s * (sn * u + cs * v) + t.1)
-    });
+    let frame = resampled_frame(&ref_slope, theta, s, t);
     let img = SlopeImage::new_checked(&frame, FRAME_W, FRAME_W, 10.0).unwrap();
     let prior = Prior {
         center_tile_px: [t.0 as f32 + 4.0, t.1 as f32 - 3.0],
@@ -359,12 +370,7 @@ fn a_fix_far_from_the_frames_own_scale_is_refused() {
     let nav = Navigator::new(tile, unchecked);
     let mut ws = Box::new(Ws::new());
     let (theta, s, t) = (30.0f64, 0.5, (128.0, 120.0));
-    let (sn, cs) = theta.to_radians().sin_cos();
-    let c = (FRAME_W as f64 - 1.0) / 2.0;
-    let frame = resample_slope(&ref_slope, REF_W, REF_W, FRAME_W, FRAME_W, |x, y| {
-        let (u, v) = (x - c, y - c);
-        (s * (cs * u - sn * v) + t.0, s * (sn * u + cs * v) + t.1)
-    });
+    let frame = resampled_frame(&ref_slope, theta, s, t);
     let locate = |ws: &mut Ws, pixel_m: f32| {
         let img = SlopeImage::new_checked(&frame, FRAME_W, FRAME_W, pixel_m).unwrap();
         nav.locate_slope(ws, &img, None).unwrap().outcome

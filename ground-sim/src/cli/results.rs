@@ -818,36 +818,29 @@ const INSAR_DESCENT_OPTIONS: [(&str, &str, usize, f64); 4] = [
     ("plains", "smooth plains", 1, 128.0),
 ];
 
-/// The sentence that says what the rows of the mission options in [`INSAR_DESCENT_OPTIONS`]
-/// flew: one per option kind, naming its scenes.
+/// The sentences that say what the rows of the mission options in [`INSAR_DESCENT_OPTIONS`]
+/// flew: one per option kind (stacked passes, a second baseline), naming its scenes.
 fn descent_options_words() -> String {
-    let labels = |long: bool| {
-        let mut l: Vec<&str> = INSAR_DESCENT_OPTIONS
-            .iter()
-            .filter(|o| (o.3 > 0.0) == long)
-            .map(|o| o.1)
-            .collect();
-        l.dedup();
-        l.join(", ")
-    };
-    let mut words = String::new();
-    for &(_, _, n, b) in INSAR_DESCENT_OPTIONS.iter() {
-        let text = if b > 0.0 {
-            format!(
-                " The rows marked \"second {b} m baseline\" fly the {} again on a map whose heights come from a second, {b} m interferogram where it agrees with the 32 m one and is better (`insar --long-baseline-m {b}`: a second satellite in formation, twice the SAR time; docs/insar.md).",
-                labels(true)
-            )
-        } else {
-            format!(
-                " The rows marked \"{n} passes\" fly the {} again on a map of {n} passes stacked per look (`insar --passes {n}`: {n}× the SAR time; the receiver noise averages over the passes, the speckle they share does not).",
-                labels(false)
-            )
-        };
-        if !words.contains(&text) {
-            words.push_str(&text);
-        }
-    }
-    words
+    [false, true]
+        .into_iter()
+        .filter_map(|long| {
+            let of_kind: Vec<_> = INSAR_DESCENT_OPTIONS
+                .iter()
+                .filter(|o| (o.3 > 0.0) == long)
+                .collect();
+            let &&(_, _, n, b) = of_kind.first()?;
+            let labels = of_kind.iter().map(|o| o.1).collect::<Vec<_>>().join(", ");
+            Some(if long {
+                format!(
+                    " The rows marked \"second {b} m baseline\" fly the {labels} again on a map whose heights come from a second, {b} m interferogram where it agrees with the 32 m one and is better (`insar --long-baseline-m {b}`: a second satellite in formation, twice the SAR time; docs/insar.md)."
+                )
+            } else {
+                format!(
+                    " The rows marked \"{n} passes\" fly the {labels} again on a map of {n} passes stacked per look (`insar --passes {n}`: {n}× the SAR time; the receiver noise averages over the passes, the speckle they share does not)."
+                )
+            })
+        })
+        .collect()
 }
 
 /// Header of every descent table, matching [`descent_row`]'s columns.
