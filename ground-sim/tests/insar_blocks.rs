@@ -272,6 +272,8 @@ fn blocks_in_separate_processes_mosaic_to_the_one_process_map() {
     assert!(e.contains("fits one block"), "{e}");
 }
 
+/// The default radar (both looks, each with its second pair) in blocks, split across processes
+/// and joined, against one piece.
 #[test]
 fn both_look_directions_in_blocks() {
     let dir = tempfile::tempdir().unwrap();
@@ -337,6 +339,16 @@ fn both_look_directions_in_blocks() {
         o["height_rmse_m"]
     );
     assert_eq!(b["blocks"]["overlap_cycle_disagreements"], 0);
+    // The default radar's second 128 m pair flew in every block, for each look, as in one piece.
+    for r in [&b, &o] {
+        let l = r["baselines"].as_array().expect("baselines recorded");
+        assert_eq!(l.len(), 2, "{l:?}");
+        assert!(
+            l.iter()
+                .all(|x| x["long_baseline_m"].as_f64() == Some(128.0)),
+            "{l:?}"
+        );
+    }
     // Both maps claim the reference error of their one-look share, blocked as in one piece.
     let sigma = |d: &Path| -> f64 {
         let t: serde_json::Value =
@@ -365,6 +377,9 @@ fn stacked_passes_in_blocks() {
         "--no-progress",
         "--looks",
         "one",
+        // The stacking alone (the default radar's second pair is `both_look_directions_in_blocks`).
+        "--long-baseline-m",
+        "0",
         "--passes",
         "2",
         "--block-cells",
@@ -381,6 +396,8 @@ fn stacked_passes_in_blocks() {
         "--no-progress",
         "--looks",
         "one",
+        "--long-baseline-m",
+        "0",
         "--block-cells",
         "0",
     ]);

@@ -58,6 +58,13 @@ fn insar_folder_works_with_trn_and_eval() {
     ] {
         assert!(report.get(k).is_some_and(|v| v.is_number()), "no {k}");
     }
+    // The default radar is the mission design: both looks, each with its second 128 m pair.
+    let b = report["baselines"].as_array().expect("baselines recorded");
+    assert_eq!(b.len(), 2, "one second pair per look: {b:?}");
+    for l in b {
+        assert_eq!(l["long_baseline_m"].as_f64(), Some(128.0), "{l}");
+        assert!(l["long_share"].as_f64().unwrap() > 0.0, "{l}");
+    }
     assert!(report["height_rmse_m"].as_f64().unwrap() < 5.0);
     // The default radar is the mission design: thermal noise at −25 dB, 32 m, both looks.
     let sar_cfg = &report["sar"]["config"];
@@ -124,6 +131,10 @@ fn insar_folder_works_with_trn_and_eval() {
         path(&dem),
         "--looks",
         "one",
+        // The radar's own pair alone, as one pair of SLCs gives it (`--slc-dir` falls back
+        // to no second baseline).
+        "--long-baseline-m",
+        "0",
         "--out",
         path(&ins1),
         "--no-progress",
@@ -175,6 +186,27 @@ fn insar_folder_works_with_trn_and_eval() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(
         err.contains("--passes 2 simulates its passes itself"),
+        "{err}"
+    );
+    // Nor given a second pair: asked for, it is refused (the default falls back, above).
+    let out = Command::new(env!("CARGO_BIN_EXE_ground-sim"))
+        .args([
+            "insar",
+            "--dem",
+            path(&dem),
+            "--slc-dir",
+            path(&sar),
+            "--long-baseline-m",
+            "128",
+            "--out",
+            path(&dir.path().join("insar4")),
+        ])
+        .output()
+        .expect("ground-sim runs");
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("--long-baseline-m simulates its second pair itself"),
         "{err}"
     );
     // The map's own error the tiles claim: a one-look map the whole blur term (0.08 × 22.4 m),

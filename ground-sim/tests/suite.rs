@@ -62,11 +62,12 @@ fn quick_suite_outputs_agree_with_each_other() {
         let h = sc["insar_height_rmse_m"].as_f64().unwrap();
         assert!(h > 0.0 && h < 10.0, "{sc}");
     }
-    // The default radar is recorded: the mission design, noisy, both looks.
+    // The default radar is recorded: the mission design, noisy, both looks, a second pair.
     let radar = &r["spec"]["radar"];
     assert_eq!(radar["baseline_m"], 32.0, "{radar}");
     assert_eq!(radar["noise_equivalent_sigma0_db"], -25.0, "{radar}");
     assert_eq!(r["spec"]["looks"], "both", "{}", r["spec"]);
+    assert_eq!(r["spec"]["long_baseline_m"], 128.0, "{}", r["spec"]);
     assert!(out.join("suite.png").exists() && out.join("suite.md").exists());
     let table = std::fs::read_to_string(out.join("suite.md")).unwrap();
     assert!(table.contains("| lola | truth") && table.contains("| fresh-rim | insar"));

@@ -21,7 +21,8 @@ use ground_sim::flyer::frames::{FramePose, SensorModel};
 use ground_sim::flyer::onboard::Budget;
 use ground_sim::insar::InsarConfig;
 use ground_sim::insar::pipeline::{
-    LookDirections, fuse_looks, mirrored_dem, process_simulated, run_from_dem, west_pass_seed,
+    LookDirections, fly_long_pair, fuse_looks, mirrored_dem, process_simulated, run_from_dem,
+    west_pass_seed,
 };
 use ground_sim::insar::products::{InsarReport, RunContext, SarSummary, write_outputs};
 use ground_sim::reference::load;
@@ -49,8 +50,8 @@ pub struct Args {
     /// Heading of the TRN frame: its +x axis, clockwise from east, degrees.
     #[arg(long, default_value_t = 0.0)]
     pub heading_deg: f64,
-    /// Radar design (default `mission`: 32 m baseline, NESZ −25 dB, the Moon's diffuse echo,
-    /// both looks; `paper`: the paper's noise-free model, 8 m, one look).
+    /// Radar design (default `mission`: 32 m baseline with a second 128 m pair, NESZ −25 dB,
+    /// the Moon's diffuse echo, both looks; `paper`: the paper's noise-free model, 8 m, one look).
     #[arg(long, value_enum)]
     pub radar: Option<RadarPreset>,
     /// Thermal noise of the radar, NESZ in dB (default: the design's, −25 dB for `mission`).
@@ -67,6 +68,10 @@ pub struct Args {
     /// fused in; twice the SAR time). Default: the design's (`mission` both, `paper` one).
     #[arg(long, value_enum)]
     pub looks: Option<LookDirections>,
+    /// A second, longer baseline, m (0 = none; `insar --long-baseline-m`; its SAR time added).
+    /// Default: the design's (`mission` 128 m, `paper` none).
+    #[arg(long)]
+    pub long_baseline_m: Option<f64>,
     /// Hide progress bars.
     #[arg(long)]
     pub no_progress: bool,
@@ -180,9 +185,27 @@ pub fn run_demo(a: &Args) -> anyhow::Result<DemoSummary> {
 
     // 3. InSAR and the reference folder.
     let t0 = Instant::now();
-    let cfg = InsarConfig::default().with_radar(&sar_cfg);
+    let cfg = InsarConfig {
+        long_baseline_m: super::insar::long_baseline_or_preset(a.long_baseline_m, &radar, &sar_cfg),
+        ..InsarConfig::default()
+    }
+    .with_radar(&sar_cfg);
+    cfg.validate()?;
     let (truth_grid, mut product) = process_simulated(&truth, &pair, pol, &cfg)?;
     let mut sar_summary = SarSummary::of(&pair);
+    // The east look's second pair (as `run_from_dem` flies it); the west look's comes with
+    // its `run_from_dem` below.
+    if let Some(long) = fly_long_pair(
+        &sdem,
+        &sar_cfg,
+        pol,
+        &cfg,
+        !a.no_progress,
+        &truth_grid.grid,
+        &mut product,
+    )? {
+        sar_summary.timings += &long;
+    }
     if looks == LookDirections::Both {
         // The west-looking pass: the same radar over the mirrored scene, fused cell by cell.
         // Its own noise, as `run_from_dem_looks` draws it.
@@ -205,9 +228,19 @@ pub fn run_demo(a: &Args) -> anyhow::Result<DemoSummary> {
     let insar = write_outputs(&insar_dir, &product, &truth_grid, &ctx)?;
     let acc = &insar.accuracy;
     steps.push(DemoStep {
-        step: match looks {
-            LookDirections::One => "InSAR DEM (20 m)".into(),
-            LookDirections::Both => "InSAR DEM (20 m, both looks; west pass's SAR incl.)".into(),
+        step: match (looks, cfg.long_baseline_m > 0.0) {
+            (LookDirections::One, false) => "InSAR DEM (20 m)".into(),
+            (LookDirections::One, true) => format!(
+                "InSAR DEM (20 m, + {} m pair; its SAR incl.)",
+                cfg.long_baseline_m
+            ),
+            (LookDirections::Both, false) => {
+                "InSAR DEM (20 m, both looks; west pass's SAR incl.)".into()
+            }
+            (LookDirections::Both, true) => format!(
+                "InSAR DEM (20 m, both looks, + {} m pairs; their SAR incl.)",
+                cfg.long_baseline_m
+            ),
         },
         result: format!(
             "height RMSE {:.2} m (CRLB {:.2} m), slope RMSE {:.2}°, valid {:.1} %, coherence {:.3}",

@@ -14,7 +14,7 @@ use ground_sim::insar::products::{InsarReport, RunContext, SarSummary, write_out
 use ground_sim::insar::{InsarConfig, blocks, label};
 use ground_sim::sar::cli::RadarArgs;
 use ground_sim::sar::pipeline::{SimOptions, simulate_with};
-use ground_sim::sar::{Polarisation, SarDem, Slc};
+use ground_sim::sar::{Polarisation, SarConfig, SarDem, Slc};
 
 /// Arguments of `ground-sim insar`.
 #[derive(Debug, Clone, clap::Args)]
@@ -71,12 +71,14 @@ pub struct Args {
     /// adds its SAR time). Not with `--slc-dir`.
     #[arg(long, default_value_t = 1)]
     pub passes: usize,
-    /// A second, longer baseline, m (0 = none): its interferogram's heights replace the
-    /// radar's own where they agree and are better (its cycles chosen against the short map;
-    /// the same ground seen through its own receivers; its SAR time added; docs/insar.md, "A
-    /// second, longer baseline"). Not with `--slc-dir`.
-    #[arg(long, default_value_t = 0.0)]
-    pub long_baseline_m: f64,
+    /// A second, longer baseline, m (0 = none, the radar's own pair alone): its
+    /// interferogram's heights replace the radar's own where they agree and are better (its
+    /// cycles chosen against the short map; the same ground seen through its own receivers;
+    /// its SAR time added; docs/insar.md, "A second, longer baseline"). Default: the radar
+    /// preset's (`mission` 128 m, `paper` none), none where it would not be longer than the
+    /// radar's own baseline or with `--slc-dir` (which holds one pair).
+    #[arg(long)]
+    pub long_baseline_m: Option<f64>,
     /// σ of the long pair's DEM filter (the Gaussian mean), output pixels (0 = none; default:
     /// the short pair's). 0.5 makes a better DEM of gentle cratered ground and tiles that
     /// navigate worse (docs/insar.md, "The error at the chain's own resolution, and the long
@@ -134,7 +136,38 @@ pub fn looks_or_preset(looks: Option<LookDirections>, r: &RadarArgs) -> LookDire
     looks.unwrap_or_else(|| LookDirections::of_preset(r.preset()))
 }
 
+/// The second baseline a command's InSAR maps fuse in, m (0 = none): `given` when given, else
+/// the radar preset's ([`ground_sim::sar::RadarPreset::long_baseline_m`]) where it is longer than `sar`'s own
+/// baseline (a radar given a longer boom by hand flies that boom alone, and is told so).
+pub fn long_baseline_or_preset(given: Option<f64>, r: &RadarArgs, sar: &SarConfig) -> f64 {
+    if let Some(b) = given {
+        return b;
+    }
+    let b = r.preset().long_baseline_m();
+    if b > 0.0 && b <= sar.baseline_m {
+        eprintln!(
+            "note: the {} radar's second {b} m baseline is not longer than this radar's {} m: \
+             its maps use the {} m pair alone (--long-baseline-m sets one)",
+            r.preset().name(),
+            sar.baseline_m,
+            sar.baseline_m
+        );
+        return 0.0;
+    }
+    b
+}
+
 impl Args {
+    /// This run's second baseline, m: `--long-baseline-m`, else none when `--slc-dir` brings
+    /// one pair's SLCs, else the radar preset's ([`long_baseline_or_preset`]).
+    pub fn long_baseline_m(&self, sar: &SarConfig) -> f64 {
+        match (self.long_baseline_m, &self.slc_dir) {
+            (Some(b), _) => b,
+            (None, Some(_)) => 0.0,
+            (None, None) => long_baseline_or_preset(None, &self.radar, sar),
+        }
+    }
+
     /// This run's look directions: `--looks`, else one pass when `--slc-dir` brings one pass's
     /// SLCs, else the radar preset's.
     pub fn looks(&self) -> LookDirections {
@@ -170,7 +203,7 @@ pub fn run_chain(a: &Args) -> anyhow::Result<Outcome> {
         shadow_below_median_db: a.shadow_below_median_db,
         prior_dem_cell_m: a.prior_dem_cell_m,
         passes: a.passes,
-        long_baseline_m: a.long_baseline_m,
+        long_baseline_m: a.long_baseline_m(&sar),
         long_filter_sigma_px: a.long_filter_sigma_px,
         ..InsarConfig::default()
     }
@@ -460,4 +493,30 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         eprintln!("warning: the reference tile has no features (too small or too noisy a DEM)");
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use ground_sim::sar::{MISSION_LONG_BASELINE_M, RadarPreset};
+
+    /// The second pair each radar flies by default, and when it gives way.
+    #[test]
+    fn the_second_baseline_follows_the_preset_unless_told() {
+        let of = |radar: Option<RadarPreset>, baseline_m: Option<f64>, given: Option<f64>| {
+            let r = RadarArgs {
+                radar,
+                baseline_m,
+                ..RadarArgs::default()
+            };
+            long_baseline_or_preset(given, &r, &r.resolve().unwrap())
+        };
+        assert_eq!(of(None, None, None), MISSION_LONG_BASELINE_M);
+        assert_eq!(of(Some(RadarPreset::Paper), None, None), 0.0);
+        assert_eq!(of(None, None, Some(0.0)), 0.0);
+        assert_eq!(of(Some(RadarPreset::Paper), None, Some(64.0)), 64.0);
+        // A boom given by hand shorter than the second pair keeps it; one as long flies alone.
+        assert_eq!(of(None, Some(64.0), None), MISSION_LONG_BASELINE_M);
+        assert_eq!(of(None, Some(200.0), None), 0.0);
+    }
 }

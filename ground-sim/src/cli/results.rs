@@ -206,8 +206,8 @@ fn suite_section(
         "| scene | InSAR, no prior | InSAR, prior |\n|---|---|---|"
     )?;
     md.push_str(&success_rows(&report_paper, &all_cols[2..]));
-    // The option of a second, longer baseline, on both seeds beside the default radar.
-    long_baseline_section(md, a, go, [(&seed, &report), (&seed2, &report2)])?;
+    // The default radar without its second pair, on both seeds beside the default radar.
+    short_pair_section(md, a, go, [(&seed, &report), (&seed2, &report2)])?;
     writeln!(
         md,
         "\nThe navigability maps over all campaigns of each seed (frames called \"go\": how many, how many got a correct fix; agreement = outcomes predicted right). The footprint rule reads feature count, valid fraction and slope texture under the frame; the rehearsal flies the flight code against the reference with frames from a draw of the terrain given its own DEM and its reported error, in the campaign's prior mode (`ground_sim::evaluation::rehearsal`):\n\n| seed | tile | map | go frames | go success | agreement |\n|---|---|---|---|---|---|"
@@ -390,23 +390,20 @@ fn success_rows(report: &Value, cols: &[(&str, bool)]) -> String {
     md
 }
 
-/// Second baseline of the radar option the suite is run with again ([`long_baseline_section`]).
-const SUITE_LONG_BASELINE_M: f64 = 128.0;
-
-/// The InSAR suite again with a second, [`SUITE_LONG_BASELINE_M`] baseline (`suite --kinds insar
-/// --long-baseline-m`), at both seeds, beside the default radar's rows of `defaults`
-/// (seed, that seed's suite report).
-fn long_baseline_section(
+/// The InSAR suite again with the default radar's 32 m pair alone (`suite --kinds insar
+/// --long-baseline-m 0`, the default radar until session 49), at both seeds, beside the
+/// default radar's rows of `defaults` (seed, that seed's suite report).
+fn short_pair_section(
     md: &mut String,
     a: &Args,
     go: &dyn Fn(&[&str]) -> anyhow::Result<()>,
     defaults: [(&String, &Value); 2],
 ) -> anyhow::Result<()> {
     let trials = a.suite_trials.to_string();
-    let long = SUITE_LONG_BASELINE_M.to_string();
+    let long = ground_sim::sar::RadarPreset::default().long_baseline_m();
     let mut reports = Vec::new();
     for (sd, _) in defaults {
-        let dir = a.work.join(format!("suite-long-baseline-seed{sd}"));
+        let dir = a.work.join(format!("suite-short-pair-seed{sd}"));
         go(&[
             "suite",
             "--out",
@@ -420,7 +417,7 @@ fn long_baseline_section(
             "--kinds",
             "insar",
             "--long-baseline-m",
-            &long,
+            "0",
             "--rehearsal-step-m",
             "0",
         ])?;
@@ -429,9 +426,9 @@ fn long_baseline_section(
     let (s1, s2) = (defaults[0].0, defaults[1].0);
     writeln!(
         md,
-        "\n### InSAR tiles with a second, {long} m baseline (`suite --kinds insar --long-baseline-m {long}`, seeds {s1} and {s2})\n\n\
-         The same scenes and frames as the tables above; each look's heights come from a second, {long} m interferogram wherever it agrees with the 32 m one and claims a smaller bound (docs/insar.md, \"A second, longer baseline\"; twice the SAR time). \
-         Each cell: seed {s1} / seed {s2}, {trials} frames per campaign; the default radar's figure in brackets.\n\n\
+        "\n### InSAR tiles from the 32 m pair alone (`suite --kinds insar --long-baseline-m 0`, seeds {s1} and {s2})\n\n\
+         The same scenes and frames as the tables above, the tiles made without the default radar's second, {long} m pair (each look's heights from the 32 m interferogram alone; half the SAR time; the default radar until session 49). \
+         Each cell: seed {s1} / seed {s2}, {trials} frames per campaign; the default radar's figure (with its second pair) in brackets.\n\n\
          | scene | success, no prior | success, prior | position p95 (m), no prior | fixes within 3σ, no prior | mean NEES, no prior | height RMSE (m) |\n|---|---|---|---|---|---|---|"
     )?;
     let row = |rep: &Value, scene: &str, prior: bool| -> Option<Value> {
@@ -806,41 +803,14 @@ const DESCENT_MAPS: [(&str, &str); 3] = [
     ("plains", "smooth plains"),
 ];
 
-/// Maps the InSAR descents fly again with a mission option (preset, label, passes stacked per
-/// look, second baseline m or 0): the one scene whose default map misses the touchdown bars
-/// with a landing region mapped with more passes (docs/registration.md, session 38), and every
-/// descent scene with a second, longer baseline (docs/insar.md, session 43), the candidate
-/// mission design: not the default yet, so that its rows stand beside the default's.
-const INSAR_DESCENT_OPTIONS: [(&str, &str, usize, f64); 4] = [
-    ("plains", "smooth plains", 4, 0.0),
-    ("lola", "LOLA-calibrated", 1, 128.0),
-    ("shoemaker", "Shoemaker-like floor", 1, 128.0),
-    ("plains", "smooth plains", 1, 128.0),
-];
-
-/// The sentences that say what the rows of the mission options in [`INSAR_DESCENT_OPTIONS`]
-/// flew: one per option kind (stacked passes, a second baseline), naming its scenes.
+/// The sentence that says what the comparison rows of the InSAR descents flew: every descent
+/// map again with the radar's 32 m pair alone (`insar --long-baseline-m 0`), the default
+/// radar before session 49, so that what the second pair buys stands beside it.
 fn descent_options_words() -> String {
-    [false, true]
-        .into_iter()
-        .filter_map(|long| {
-            let of_kind: Vec<_> = INSAR_DESCENT_OPTIONS
-                .iter()
-                .filter(|o| (o.3 > 0.0) == long)
-                .collect();
-            let &&(_, _, n, b) = of_kind.first()?;
-            let labels = of_kind.iter().map(|o| o.1).collect::<Vec<_>>().join(", ");
-            Some(if long {
-                format!(
-                    " The rows marked \"second {b} m baseline\" fly the {labels} again on a map whose heights come from a second, {b} m interferogram where it agrees with the 32 m one and is better (`insar --long-baseline-m {b}`: a second satellite in formation, twice the SAR time; docs/insar.md)."
-                )
-            } else {
-                format!(
-                    " The rows marked \"{n} passes\" fly the {labels} again on a map of {n} passes stacked per look (`insar --passes {n}`: {n}× the SAR time; the receiver noise averages over the passes, the speckle they share does not)."
-                )
-            })
-        })
-        .collect()
+    format!(
+        " The rows marked \"32 m pair alone\" fly the same maps made without the default radar's second pair (`insar --long-baseline-m 0`: half the SAR time; the default until session 49). The default's second pair is a second satellite in formation, {} m from the first antenna; each look's heights come from its interferogram wherever it agrees with the 32 m one and claims a smaller bound (docs/insar.md, \"A second, longer baseline\").",
+        ground_sim::sar::MISSION_LONG_BASELINE_M
+    )
 }
 
 /// Header of every descent table, matching [`descent_row`]'s columns.
@@ -848,10 +818,15 @@ const DESCENT_TABLE_HEAD: &str = "| map | aiding | hazard avoidance | runs | lan
 
 /// The default radar in words, for the sections whose maps `insar` makes with it.
 fn default_radar_words() -> String {
-    ground_sim::evaluation::suite::radar_words(
-        &ground_sim::sar::RadarPreset::default().config(),
-        ground_sim::insar::pipeline::LookDirections::of_preset(Default::default()),
-        1,
+    let preset = ground_sim::sar::RadarPreset::default();
+    format!(
+        "{}, a second {} m pair fused in",
+        ground_sim::evaluation::suite::radar_words(
+            &preset.config(),
+            ground_sim::insar::pipeline::LookDirections::of_preset(preset),
+            1,
+        ),
+        preset.long_baseline_m()
     )
 }
 
@@ -874,26 +849,19 @@ fn insar_descent_section(
     writeln!(md, "{DESCENT_TABLE_HEAD}")?;
     let mut verdicts = Vec::new();
     let mut maps = Vec::new();
-    let one_pass = DESCENT_MAPS.iter().map(|&(p, l)| (p, l, 1usize, 0.0));
-    for (preset, map_label, passes, long_m) in one_pass.chain(INSAR_DESCENT_OPTIONS) {
-        let (map_label, stack) = if long_m > 0.0 {
-            (
-                format!("{map_label}, InSAR, second {long_m} m baseline"),
-                format!("-lb{long_m}"),
-            )
-        } else if passes > 1 {
-            (
-                format!("{map_label}, InSAR, {passes} passes"),
-                format!("-x{passes}"),
-            )
+    // The default radar's maps first, then each again with the 32 m pair alone.
+    let default = DESCENT_MAPS.iter().map(|&(p, l)| (p, l, false));
+    let short = DESCENT_MAPS.iter().map(|&(p, l)| (p, l, true));
+    for (preset, map_label, short_pair) in default.chain(short) {
+        let (map_label, stack) = if short_pair {
+            (format!("{map_label}, InSAR, 32 m pair alone"), "-short")
         } else {
-            (format!("{map_label}, InSAR"), String::new())
+            (format!("{map_label}, InSAR"), "")
         };
         let map_label = map_label.as_str();
         let dem = w(&format!("{preset}16.tif"));
         let tile = w(&format!("{preset}16-insar{stack}"));
-        let (passes_arg, long_arg) = (passes.to_string(), long_m.to_string());
-        go(&[
+        let mut v = vec![
             "insar",
             "--dem",
             &dem,
@@ -901,12 +869,12 @@ fn insar_descent_section(
             &tile,
             "--seed",
             &seed,
-            "--passes",
-            &passes_arg,
-            "--long-baseline-m",
-            &long_arg,
             "--no-progress",
-        ])?;
+        ];
+        if short_pair {
+            v.extend(["--long-baseline-m", "0"]);
+        }
+        go(&v)?;
         let r = read(&Path::new(&tile).join("report.json"))?;
         maps.push(format!(
             "{map_label}: height RMSE {} m (CRLB {} m), slope RMSE {}°, {} tile features ({} of them ground)",

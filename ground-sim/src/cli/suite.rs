@@ -69,8 +69,9 @@ pub struct Args {
     #[arg(long, default_value_t = 1)]
     pub passes: usize,
     /// A second, longer baseline for the InSAR tiles, m (0 = none; `insar --long-baseline-m`).
-    #[arg(long, default_value_t = 0.0)]
-    pub long_baseline_m: f64,
+    /// Default: the radar preset's (`mission` 128 m, `paper` none).
+    #[arg(long)]
+    pub long_baseline_m: Option<f64>,
     /// σ of the long pair's DEM filter, output pixels (`insar --long-filter-sigma-px`;
     /// default the short pair's).
     #[arg(long)]
@@ -124,14 +125,17 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
     if trials == 0 {
         bail!("--trials must be ≥ 1");
     }
+    let (radar, polarisation) = super::insar::radar_config(&a.radar)?;
+    let long_baseline_m =
+        super::insar::long_baseline_or_preset(a.long_baseline_m, &a.radar, &radar);
     let passes = ground_sim::insar::InsarConfig {
         passes: a.passes,
-        long_baseline_m: a.long_baseline_m,
+        long_baseline_m,
         long_filter_sigma_px: a.long_filter_sigma_px,
         ..Default::default()
     };
     passes.validate()?;
-    if a.long_baseline_m > 0.0 && !a.kinds.contains(&TileKind::Insar) {
+    if a.long_baseline_m.is_some_and(|b| b > 0.0) && !a.kinds.contains(&TileKind::Insar) {
         bail!("--long-baseline-m is a radar option of the InSAR tiles: give --kinds insar too");
     }
     if a.passes > 1 && !a.kinds.contains(&TileKind::Insar) {
@@ -181,7 +185,6 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         height_px: size_px,
         ..Default::default()
     };
-    let (radar, polarisation) = super::insar::radar_config(&a.radar)?;
     ground_sim::insar::pipeline::check_long_baseline(&radar, &passes)?;
     let spec = SuiteSpec {
         trials,
@@ -195,7 +198,7 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         polarisation,
         looks: super::insar::looks_or_preset(a.looks, &a.radar),
         passes: a.passes,
-        long_baseline_m: a.long_baseline_m,
+        long_baseline_m,
         long_filter_sigma_px: a.long_filter_sigma_px,
         dem_filter: a.dem_filter,
         fill_tile_holes: !a.keep_tile_holes,

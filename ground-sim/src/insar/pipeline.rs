@@ -222,7 +222,8 @@ impl InsarConfig {
         if self.long_baseline_m > 0.0 && !self.unwrap {
             return Err(InsarError::Input(
                 "a long baseline needs its phase unwrapped (its cycles are chosen against the \
-                 short map): drop --no-unwrap or --long-baseline-m"
+                 short map): drop --no-unwrap, or fly the radar's own pair alone \
+                 (--long-baseline-m 0)"
                     .into(),
             ));
         }
@@ -1212,20 +1213,16 @@ pub fn run_from_dem(
     let (truth_on_grid, mut product) = process_simulated_stack(truth, &passes, pol, &cfg)?;
     // The run's SAR time is every pass's.
     let mut timings = stack_timings(&passes);
-    if cfg.long_baseline_m > 0.0 {
-        let long_sar = super::baselines::long_radar(&sar, cfg.long_baseline_m);
-        let long_passes = fly(&long_sar, &|k| {
-            Some(super::baselines::long_noise_seed(sar.seed, k))
-        })?;
-        let coarse = (cfg.prior_dem_cell_m > 0.0)
-            .then(|| coarse_prior(&truth_on_grid.grid, cfg.prior_dem_cell_m));
-        super::baselines::add_long_baseline(
-            &mut product,
-            &slc_pairs(&long_passes, pol)?,
-            coarse.as_deref(),
-            &cfg,
-        )?;
-        timings += &stack_timings(&long_passes);
+    if let Some(long) = fly_long_pair(
+        &sdem,
+        &sar,
+        pol,
+        &cfg,
+        progress,
+        &truth_on_grid.grid,
+        &mut product,
+    )? {
+        timings += &long;
     }
     let mut pair = passes
         .into_iter()
@@ -1238,6 +1235,46 @@ pub fn run_from_dem(
         truth: truth_on_grid,
         product,
     })
+}
+
+/// The second pair of a run whose `cfg` asks for one ([`InsarConfig::long_baseline_m`] > 0):
+/// fly it over `sdem` (`cfg.passes` passes, each with its own receiver noise) and fuse its
+/// heights into `product`, whose own pair was flown with `sar` (only the channel `pol`) and
+/// whose truth on the grid is `truth_grid` (for the coarse cycle prior). Returns the long
+/// passes' SAR time, or `None` (nothing flown) without a second baseline.
+pub fn fly_long_pair(
+    sdem: &SarDem,
+    sar: &SarConfig,
+    pol: Polarisation,
+    cfg: &InsarConfig,
+    progress: bool,
+    truth_grid: &Dem,
+    product: &mut InsarProduct,
+) -> anyhow::Result<Option<Timings>> {
+    if cfg.long_baseline_m <= 0.0 {
+        return Ok(None);
+    }
+    check_long_baseline(sar, cfg)?;
+    let long_sar = super::baselines::long_radar(sar, cfg.long_baseline_m);
+    let long_passes = (0..cfg.passes.max(1))
+        .map(|k| {
+            let opts = SimOptions {
+                progress,
+                noise_seed: Some(super::baselines::long_noise_seed(sar.seed, k)),
+                ..SimOptions::default()
+            };
+            simulate_with(sdem, &long_sar, &opts)
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    let coarse =
+        (cfg.prior_dem_cell_m > 0.0).then(|| coarse_prior(truth_grid, cfg.prior_dem_cell_m));
+    super::baselines::add_long_baseline(
+        product,
+        &slc_pairs(&long_passes, pol)?,
+        coarse.as_deref(),
+        cfg,
+    )?;
+    Ok(Some(stack_timings(&long_passes)))
 }
 
 /// [`run_from_dem`] with a choice of look directions. `Both` flies a second pass over the

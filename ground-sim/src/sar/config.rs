@@ -13,6 +13,15 @@ use super::{SPEED_OF_LIGHT_M_S, SarError, SarResult};
 /// "Radar design under NESZ −25 dB"); a boom of that length has flown (SRTM's 60 m mast).
 pub const MISSION_BASELINE_M: f64 = 32.0;
 
+/// Second, longer baseline of the [`RadarPreset::Mission`] design, m: a second satellite in
+/// formation whose 128 m interferogram gives each look's heights wherever it agrees with the
+/// [`MISSION_BASELINE_M`] one and claims a smaller bound (the InSAR chain's
+/// `insar::InsarConfig::long_baseline_m`; twice the SAR time). What takes the 16 km descents
+/// over the smooth plains' InSAR map from 4.4 m to 1.7–2.0 m at touchdown (p95, with
+/// velocimeter) and every descent map within the touchdown bars (docs/insar.md, "A second,
+/// longer baseline"; session 49 made it the default).
+pub const MISSION_LONG_BASELINE_M: f64 = 128.0;
+
 /// Thermal noise of the [`RadarPreset::Mission`] design (the default radar), NESZ in dB: the
 /// noise level of a typical spaceborne L-band SAR (SAOCOM's L-band instrument, at 1275 MHz, is
 /// specified at −28 dB in its single and dual polarisation modes; −25 dB leaves 3 dB for a
@@ -35,8 +44,9 @@ pub enum RadarPreset {
     /// noise, the two-scale surface alone, one look (east).
     Paper,
     /// The mission design: the paper's radar with a [`MISSION_BASELINE_M`] boom, thermal noise
-    /// at [`MISSION_NESZ_DB`], the Moon's diffuse echo ([`MOON_DIFFUSE_DB`]) and two passes
-    /// looking east and west (the look count is the InSAR chain's:
+    /// at [`MISSION_NESZ_DB`], the Moon's diffuse echo ([`MOON_DIFFUSE_DB`]), a second
+    /// [`MISSION_LONG_BASELINE_M`] pair ([`RadarPreset::long_baseline_m`]) and two passes
+    /// looking east and west (the look count and the second pair are the InSAR chain's:
     /// `insar::pipeline::LookDirections::of_preset`).
     #[default]
     Mission,
@@ -59,6 +69,17 @@ impl RadarPreset {
             }
         }
         c
+    }
+
+    /// The second, longer baseline the design's InSAR maps fuse in, m (0 = none): the paper's
+    /// radar has one pair, the mission's a second at [`MISSION_LONG_BASELINE_M`]. Like the
+    /// look count it is the InSAR chain's choice, not the SAR simulation's ([`SarConfig`] is
+    /// the first pair's radar).
+    pub fn long_baseline_m(self) -> f64 {
+        match self {
+            RadarPreset::Paper => 0.0,
+            RadarPreset::Mission => MISSION_LONG_BASELINE_M,
+        }
     }
 
     /// The name the CLI and the reports use (`paper`, `mission`).

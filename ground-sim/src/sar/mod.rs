@@ -53,8 +53,8 @@ pub mod slc;
 mod tests;
 
 pub use config::{
-    Derived, MISSION_BASELINE_M, MISSION_NESZ_DB, MOON_DIFFUSE_DB, Polarisation, RadarPreset,
-    SarConfig,
+    Derived, MISSION_BASELINE_M, MISSION_LONG_BASELINE_M, MISSION_NESZ_DB, MOON_DIFFUSE_DB,
+    Polarisation, RadarPreset, SarConfig,
 };
 pub use geometry::{AcquisitionPlan, Antenna, Geometry, SarDem};
 pub use pipeline::{InsarPair, simulate_insar_pair};
