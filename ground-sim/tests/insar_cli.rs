@@ -18,6 +18,16 @@ fn run(args: &[&str]) -> String {
     text
 }
 
+/// Run `ground-sim` expecting a refusal; its stderr.
+fn refused(args: &[&str]) -> String {
+    let out = Command::new(env!("CARGO_BIN_EXE_ground-sim"))
+        .args(args)
+        .output()
+        .expect("ground-sim runs");
+    assert!(!out.status.success(), "ground-sim {args:?} was not refused");
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
 fn path(p: &Path) -> &str {
     p.to_str().expect("utf-8 temp path")
 }
@@ -168,43 +178,33 @@ fn insar_folder_works_with_trn_and_eval() {
         assert!(p["median_residual_m"].as_f64().unwrap() < 20.0, "{p}");
     }
     // One pass of SLCs cannot be stacked.
-    let out = Command::new(env!("CARGO_BIN_EXE_ground-sim"))
-        .args([
-            "insar",
-            "--dem",
-            path(&dem),
-            "--slc-dir",
-            path(&sar),
-            "--passes",
-            "2",
-            "--out",
-            path(&dir.path().join("insar3")),
-        ])
-        .output()
-        .expect("ground-sim runs");
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
+    let err = refused(&[
+        "insar",
+        "--dem",
+        path(&dem),
+        "--slc-dir",
+        path(&sar),
+        "--passes",
+        "2",
+        "--out",
+        path(&dir.path().join("insar3")),
+    ]);
     assert!(
         err.contains("--passes 2 simulates its passes itself"),
         "{err}"
     );
     // Nor given a second pair: asked for, it is refused (the default falls back, above).
-    let out = Command::new(env!("CARGO_BIN_EXE_ground-sim"))
-        .args([
-            "insar",
-            "--dem",
-            path(&dem),
-            "--slc-dir",
-            path(&sar),
-            "--long-baseline-m",
-            "128",
-            "--out",
-            path(&dir.path().join("insar4")),
-        ])
-        .output()
-        .expect("ground-sim runs");
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
+    let err = refused(&[
+        "insar",
+        "--dem",
+        path(&dem),
+        "--slc-dir",
+        path(&sar),
+        "--long-baseline-m",
+        "128",
+        "--out",
+        path(&dir.path().join("insar4")),
+    ]);
     assert!(
         err.contains("--long-baseline-m simulates its second pair itself"),
         "{err}"

@@ -806,7 +806,7 @@ const DESCENT_MAPS: [(&str, &str); 3] = [
 /// The sentence that says what the comparison rows of the InSAR descents flew: every descent
 /// map again with the radar's 32 m pair alone (`insar --long-baseline-m 0`), the default
 /// radar before session 49, so that what the second pair buys stands beside it.
-fn descent_options_words() -> String {
+fn short_pair_words() -> String {
     format!(
         " The rows marked \"32 m pair alone\" fly the same maps made without the default radar's second pair (`insar --long-baseline-m 0`: half the SAR time; the default until session 49). The default's second pair is a second satellite in formation, {} m from the first antenna; each look's heights come from its interferogram wherever it agrees with the 32 m one and claims a smaller bound (docs/insar.md, \"A second, longer baseline\").",
         ground_sim::sar::MISSION_LONG_BASELINE_M
@@ -844,7 +844,7 @@ fn insar_descent_section(
         md,
         "The same 16 km scenes, hops and seeds, the tile now made by `ground-sim insar` from each scene (the default radar: {}, radar seed {seed}), hazard avoidance on. Frames still come from the truth DEM. Here the map's own error (its height noise, and the blobs it puts a little off where the frames find them) moves every fix near the target alike, so the flyer carries it to the ground: the landing error to the spot aimed at stays small (the hazard map and the odometry are the flyer's own frames), while the navigation error at touchdown is the distance from the intended target's ground.{}\n",
         default_radar_words(),
-        descent_options_words()
+        short_pair_words()
     )?;
     writeln!(md, "{DESCENT_TABLE_HEAD}")?;
     let mut verdicts = Vec::new();

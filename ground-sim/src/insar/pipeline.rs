@@ -1196,19 +1196,9 @@ pub fn run_from_dem(
     sar.polarisations = vec![pol];
     // Pass 0 is the configuration's own; further passes of the same track see the same ground
     // (speckle) through their own receiver noise.
-    let fly = |radar: &SarConfig, noise: &dyn Fn(usize) -> Option<u64>| {
-        (0..cfg.passes.max(1))
-            .map(|k| {
-                let opts = SimOptions {
-                    progress,
-                    noise_seed: noise(k),
-                    ..SimOptions::default()
-                };
-                simulate_with(&sdem, radar, &opts)
-            })
-            .collect::<Result<Vec<_>, _>>()
-    };
-    let passes = fly(&sar, &|k| (k > 0).then(|| pass_noise_seed(sar.seed, k)))?;
+    let passes = fly_passes(&sdem, &sar, cfg.passes, progress, &|k| {
+        (k > 0).then(|| pass_noise_seed(sar.seed, k))
+    })?;
     let cfg = cfg.with_radar(&sar);
     let (truth_on_grid, mut product) = process_simulated_stack(truth, &passes, pol, &cfg)?;
     // The run's SAR time is every pass's.
@@ -1237,6 +1227,27 @@ pub fn run_from_dem(
     })
 }
 
+/// `passes` (at least one) passes of `radar` over `sdem`, pass `k` with the receiver noise
+/// seed `noise(k)` (`None`: the radar's own).
+fn fly_passes(
+    sdem: &SarDem,
+    radar: &SarConfig,
+    passes: usize,
+    progress: bool,
+    noise: &dyn Fn(usize) -> Option<u64>,
+) -> Result<Vec<InsarPair>, crate::sar::SarError> {
+    (0..passes.max(1))
+        .map(|k| {
+            let opts = SimOptions {
+                progress,
+                noise_seed: noise(k),
+                ..SimOptions::default()
+            };
+            simulate_with(sdem, radar, &opts)
+        })
+        .collect()
+}
+
 /// The second pair of a run whose `cfg` asks for one ([`InsarConfig::long_baseline_m`] > 0):
 /// fly it over `sdem` (`cfg.passes` passes, each with its own receiver noise) and fuse its
 /// heights into `product`, whose own pair was flown with `sar` (only the channel `pol`) and
@@ -1256,16 +1267,9 @@ pub fn fly_long_pair(
     }
     check_long_baseline(sar, cfg)?;
     let long_sar = super::baselines::long_radar(sar, cfg.long_baseline_m);
-    let long_passes = (0..cfg.passes.max(1))
-        .map(|k| {
-            let opts = SimOptions {
-                progress,
-                noise_seed: Some(super::baselines::long_noise_seed(sar.seed, k)),
-                ..SimOptions::default()
-            };
-            simulate_with(sdem, &long_sar, &opts)
-        })
-        .collect::<Result<Vec<_>, _>>()?;
+    let long_passes = fly_passes(sdem, &long_sar, cfg.passes, progress, &|k| {
+        Some(super::baselines::long_noise_seed(sar.seed, k))
+    })?;
     let coarse =
         (cfg.prior_dem_cell_m > 0.0).then(|| coarse_prior(truth_grid, cfg.prior_dem_cell_m));
     super::baselines::add_long_baseline(
