@@ -8,7 +8,7 @@
 use std::path::Path;
 use std::process::{Command, Output};
 
-use ground_sim::evaluation::navmap::{NavMap, NavmapThresholds};
+use ground_sim::evaluation::navmap::{GO_SUCCESS_BAR, NavMap, NavmapThresholds, agreement_ceiling};
 use ground_sim::reference::{Smoothing, load, reference_dem, surf_config_for, write_reference};
 use ground_sim::terrain::{Preset, TerrainParams, generate};
 use indicatif::ProgressBar;
@@ -147,6 +147,15 @@ fn quick_suite_outputs_agree_with_each_other() {
                 "{scene} {tag} {key}"
             );
         }
+        // The best agreement any map could reach is the one its frames' chances give (the
+        // CSV rounds them to 3 decimals, which may move a frame across the go bar), within 0–1.
+        let chances: Vec<f64> = go.iter().map(|g| g.1).collect();
+        let ceiling = row["rehearsal_agreement_ceiling"].as_f64().unwrap();
+        let from_csv = agreement_ceiling(&chances, GO_SUCCESS_BAR);
+        assert!(
+            (0.0..=1.0).contains(&ceiling) && (ceiling - from_csv).abs() < 0.03,
+            "{scene} {tag}: {ceiling} against {from_csv} from the CSV"
+        );
         // Every campaign frame lies inside the rehearsal's sites (the same centre box), and
         // "go" is the success fraction against the recorded threshold.
         let min = r["spec"]["rehearsal"]["min_success"].as_f64().unwrap();

@@ -21,8 +21,8 @@ use ground_sim::flyer::frames::{FramePose, SensorModel};
 use ground_sim::flyer::onboard::Budget;
 use ground_sim::insar::InsarConfig;
 use ground_sim::insar::pipeline::{
-    LookDirections, fly_long_pair, fuse_looks, mirrored_dem, process_simulated, run_from_dem,
-    west_pass_seed,
+    ChainRun, LookDirections, fly_long_pair, fuse_looks, mirrored_dem, process_simulated,
+    run_from_dem, west_pass_seed,
 };
 use ground_sim::insar::products::{InsarReport, RunContext, SarSummary, write_outputs};
 use ground_sim::reference::load;
@@ -191,29 +191,42 @@ pub fn run_demo(a: &Args) -> anyhow::Result<DemoSummary> {
     }
     .with_radar(&sar_cfg);
     cfg.validate()?;
-    let (truth_grid, mut product) = process_simulated(&truth, &pair, pol, &cfg)?;
-    let mut sar_summary = SarSummary::of(&pair);
-    // The east look's second pair (as `run_from_dem` flies it); the west look's comes with
-    // its `run_from_dem` below.
-    if let Some(long) = fly_long_pair(
-        &sdem,
-        &sar_cfg,
-        pol,
-        &cfg,
-        !a.no_progress,
-        &truth_grid.grid,
-        &mut product,
-    )? {
-        sar_summary.timings += &long;
-    }
-    if looks == LookDirections::Both {
-        // The west-looking pass: the same radar over the mirrored scene, fused cell by cell.
-        // Its own noise, as `run_from_dem_looks` draws it.
+    // The west-looking pass (the same radar over the mirrored scene, its own noise, as
+    // `run_from_dem_looks` draws it) flies beside the east look's processing and second pair:
+    // each is parallel inside, but not everywhere, and together they keep both cores busy.
+    // Its progress bars stay off, so the east look's draw alone.
+    let west_look = || -> anyhow::Result<Option<ChainRun>> {
+        if looks != LookDirections::Both {
+            return Ok(None);
+        }
         let west_sar = SarConfig {
             seed: west_pass_seed(sar_cfg.seed),
             ..sar_cfg.clone()
         };
-        let west = run_from_dem(&mirrored_dem(&truth)?, &west_sar, pol, &cfg, !a.no_progress)?;
+        run_from_dem(&mirrored_dem(&truth)?, &west_sar, pol, &cfg, false).map(Some)
+    };
+    let east_look = || -> anyhow::Result<_> {
+        let (truth_grid, mut product) = process_simulated(&truth, &pair, pol, &cfg)?;
+        // The east look's second pair (as `run_from_dem` flies it); the west look's comes
+        // with its `run_from_dem`.
+        let long = fly_long_pair(
+            &sdem,
+            &sar_cfg,
+            pol,
+            &cfg,
+            !a.no_progress,
+            &truth_grid.grid,
+            &mut product,
+        )?;
+        Ok((truth_grid, product, long))
+    };
+    let (east, west) = rayon::join(east_look, west_look);
+    let (truth_grid, mut product, long) = east?;
+    let mut sar_summary = SarSummary::of(&pair);
+    if let Some(long) = long {
+        sar_summary.timings += &long;
+    }
+    if let Some(west) = west? {
         fuse_looks(&mut product, &west.product)?;
         // The report's SAR time is both passes' (as `insar` reports it).
         sar_summary.timings += &west.pair.timings;

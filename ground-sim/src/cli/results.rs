@@ -242,6 +242,54 @@ fn suite_section(
             )?;
         }
     }
+    // Where a campaign's agreement misses the bar, whether any map of cells could have met it.
+    writeln!(
+        md,
+        "\nCampaigns where the rehearsal's map agrees with fewer than 90 % of outcomes, beside the best agreement any go/no-go map could reach on the same frames while its \"go\" frames fix at 99 %, if the rehearsal's chances are right (`ground_sim::evaluation::navmap::agreement_ceiling`; the chances are calibrated, the table below):\n\n| seed | scene | tile | prior | success | go frames: success | agreement | best any map |\n|---|---|---|---|---|---|---|---|"
+    )?;
+    let mut misses = 0;
+    for (sd, rep) in [(&seed, &report), (&seed2, &report2)] {
+        for r in rep["rows"].as_array().into_iter().flatten() {
+            let m = &r["rehearsal"];
+            let g = |k: &str| m[k].as_u64().unwrap_or(0);
+            let n = g("go_frames") + g("nogo_frames");
+            if m.is_null() || n == 0 {
+                continue;
+            }
+            let agree = (g("go_success") + g("nogo_frames") - g("nogo_success")) as f64 / n as f64;
+            if agree >= 0.9 {
+                continue;
+            }
+            misses += 1;
+            writeln!(
+                md,
+                "| {sd} | {} | {} | {} | {:.1} % | {} | {:.1} % | {} |",
+                r["scene"].as_str().unwrap_or("?"),
+                r["kind"].as_str().unwrap_or("?"),
+                match &r["summary"]["prior"] {
+                    serde_json::Value::Null => "none".to_string(),
+                    pr => format!("{} m, {}°", pr["sigma_m"], pr["heading_sigma_deg"]),
+                },
+                100.0 * r["summary"]["success_rate"].as_f64().unwrap_or(f64::NAN),
+                if g("go_frames") > 0 {
+                    format!(
+                        "{:.1} % of {}",
+                        100.0 * g("go_success") as f64 / g("go_frames") as f64,
+                        g("go_frames")
+                    )
+                } else {
+                    "none".into()
+                },
+                100.0 * agree,
+                r["rehearsal_agreement_ceiling"]
+                    .as_f64()
+                    .map_or("–".into(), |c| format!("{:.1} %", 100.0 * c)),
+            )?;
+        }
+    }
+    if misses == 0 {
+        writeln!(md, "| – | none | | | | | | |")?;
+    }
     // The rehearsal as a forecast: its mean predicted chance over a campaign's frames against the
     // campaign's success rate, and its calibration frame by frame.
     writeln!(

@@ -232,6 +232,48 @@ impl NavMap {
     }
 }
 
+/// Go success the navigability maps are held to (issue 14): of the frames a map calls "go",
+/// at least this fraction must get a correct fix.
+pub const GO_SUCCESS_BAR: f64 = 0.99;
+
+/// The best agreement any go/no-go map could reach over frames whose chances of a fix are
+/// `chances` (0–1, one per frame; non-finite ones are left out), if those chances are right,
+/// while the frames it calls "go" are expected to fix at `min_go_success` or better.
+///
+/// Why: where frames over the same ground fix at random (a chance well inside 0–1), a map of
+/// cells cannot be right about each frame; it can only choose which cells to call "go". The
+/// expected agreement of a choice is Σ_go p + Σ_no-go (1 − p), and among choices with the
+/// same number of "go" frames the highest chances give both the most agreement and the best
+/// go success, so the optimum is the longest run of the highest chances (adding a frame helps
+/// while its p > 0.5) whose mean stays at `min_go_success`. A campaign whose measured
+/// agreement sits near this figure is limited by its outcomes' randomness, not by the map.
+/// Returns NaN when no chance is finite.
+pub fn agreement_ceiling(chances: &[f64], min_go_success: f64) -> f64 {
+    let mut p: Vec<f64> = chances
+        .iter()
+        .copied()
+        .filter(|c| c.is_finite())
+        .map(|c| c.clamp(0.0, 1.0))
+        .collect();
+    if p.is_empty() {
+        return f64::NAN;
+    }
+    p.sort_by(|a, b| b.total_cmp(a));
+    // All "no-go" first; then each prefix of the highest chances as the "go" set.
+    let mut agree: f64 = p.iter().map(|c| 1.0 - c).sum();
+    let mut best = agree;
+    let mut go_sum = 0.0;
+    for (k, c) in p.iter().enumerate() {
+        go_sum += c;
+        agree += 2.0 * c - 1.0;
+        // A small tolerance so that chances of exactly the bar count as meeting it.
+        if go_sum / (k + 1) as f64 >= min_go_success - 1e-12 {
+            best = best.max(agree);
+        }
+    }
+    best / p.len() as f64
+}
+
 /// How the prediction fared on a campaign: each frame's prediction at its true centre against
 /// its outcome (a correct fix or not).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
@@ -270,5 +312,38 @@ impl NavmapScore {
         let n = self.go_frames + self.nogo_frames;
         let right = self.go_success + (self.nogo_frames - self.nogo_success);
         right as f64 / n.max(1) as f64
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{GO_SUCCESS_BAR, agreement_ceiling};
+
+    #[test]
+    fn the_ceiling_is_what_a_map_of_right_chances_can_agree() {
+        let close = |a: f64, b: f64| (a - b).abs() < 1e-12;
+        // Certain outcomes: a map can be right on every frame.
+        assert!(close(
+            agreement_ceiling(&[1.0, 1.0, 0.0], GO_SUCCESS_BAR),
+            1.0
+        ));
+        // Every frame a coin weighted 1 in 4: "no-go" everywhere is right 3 times in 4, and
+        // no "go" set can reach 99 %.
+        assert!(close(agreement_ceiling(&[0.25; 8], GO_SUCCESS_BAR), 0.75));
+        // Frames that fix 95 % of the time: without the go bar, "go" everywhere agrees 95 %;
+        // with it, nothing may be called "go", and the map agrees on the 5 % that fail.
+        assert!(close(agreement_ceiling(&[0.95; 10], 0.5), 0.95));
+        assert!(close(agreement_ceiling(&[0.95; 10], GO_SUCCESS_BAR), 0.05));
+        // A mix: the certain frames go, the 0.98 ones only as far as the mean stays at 0.99
+        // (one of them beside the one certain frame: (1 + 0.98) / 2 = 0.99), the rest no-go.
+        let p = [1.0, 0.98, 0.98, 0.1];
+        let want = (1.0 + 0.98 + (1.0 - 0.98) + 0.9) / 4.0;
+        assert!(close(agreement_ceiling(&p, GO_SUCCESS_BAR), want));
+        // Frames off the map's sites are left out; none at all gives NaN.
+        assert!(close(
+            agreement_ceiling(&[f64::NAN, 0.25], GO_SUCCESS_BAR),
+            0.75
+        ));
+        assert!(agreement_ceiling(&[f64::NAN], GO_SUCCESS_BAR).is_nan());
     }
 }

@@ -16,7 +16,9 @@ use crate::dem::{Dem, Interpolation, read_geotiff, resample_to_pixel, write_geot
 use crate::evaluation::campaign::{
     CampaignSpec, EvalSummary, PriorSpec, percentile, run_campaign, summarize, write_csv,
 };
-use crate::evaluation::navmap::{NavMap, NavmapScore, NavmapThresholds};
+use crate::evaluation::navmap::{
+    GO_SUCCESS_BAR, NavMap, NavmapScore, NavmapThresholds, agreement_ceiling,
+};
 use crate::evaluation::rehearsal::{ErrorModel, Rehearsal, RehearsalSpec, rehearse};
 use crate::flyer::frames::SensorModel;
 use crate::flyer::onboard::Budget;
@@ -245,6 +247,11 @@ pub struct SuiteRow {
     /// The rehearsal's predicted chance of a fix, averaged over the campaign's frame centres
     /// on its sites: its forecast of the campaign's success rate.
     pub rehearsal_predicted_success: Option<f64>,
+    /// The best agreement any go/no-go map could reach on this campaign's frames (on the
+    /// rehearsal's sites) while its "go" frames fix at [`GO_SUCCESS_BAR`], if the rehearsal's
+    /// chances are right ([`agreement_ceiling`]): where it is below the agreement bar, the
+    /// outcomes are too random for any map of cells to meet both bars on this campaign.
+    pub rehearsal_agreement_ceiling: Option<f64>,
 }
 
 /// What one scene gave beyond its campaigns.
@@ -508,6 +515,8 @@ pub fn run_scene(
                 rehearsal_frames: rehearsal.as_ref().map(|r| r.frames),
                 rehearsal_predicted_success: (!predicted.is_empty())
                     .then(|| predicted.iter().sum::<f64>() / predicted.len() as f64),
+                rehearsal_agreement_ceiling: (!predicted.is_empty())
+                    .then(|| agreement_ceiling(&predicted, GO_SUCCESS_BAR)),
             });
             progress.inc(1);
         }
@@ -686,17 +695,22 @@ pub fn radar_words(radar: &SarConfig, looks: LookDirections, passes: usize) -> S
     )
 }
 
-/// A navigability map's score as a table cell: "success of the go frames / agreement".
-fn go_cell(score: Option<&NavmapScore>) -> String {
+/// A navigability map's score as a table cell: "success of the go frames / agreement", and
+/// when given, the best agreement a map of cells could reach ([`agreement_ceiling`]) in
+/// brackets.
+fn go_cell(score: Option<&NavmapScore>, ceiling: Option<f64>) -> String {
+    let best = ceiling
+        .filter(|c| c.is_finite())
+        .map_or(String::new(), |c| format!(" (≤ {:.0} %)", 100.0 * c));
     match score {
         None => "–".into(),
         Some(m) if m.go_frames > 0 => format!(
-            "{:.1} % of {} / {:.0} %",
+            "{:.1} % of {} / {:.0} %{best}",
             100.0 * m.go_success_rate(),
             m.go_frames,
             100.0 * m.agreement()
         ),
-        Some(m) => format!("no go frame / {:.0} %", 100.0 * m.agreement()),
+        Some(m) => format!("no go frame / {:.0} %{best}", 100.0 * m.agreement()),
     }
 }
 
@@ -731,7 +745,7 @@ pub fn table_markdown(r: &SuiteReport) -> String {
               flyer could have.\n\n";
     }
     s += concat!(
-        "| scene | tile | prior | success | false | no fix (reasons) | pos p50 / p95 m | heading p95 ° | in 3σ | NEES | ms/frame | M4 work p95 (frames over 20 M / budget cut) | navmap (footprint) go: success / agree | navmap (rehearsal) go: success / agree |\n",
+        "| scene | tile | prior | success | false | no fix (reasons) | pos p50 / p95 m | heading p95 ° | in 3σ | NEES | ms/frame | M4 work p95 (frames over 20 M / budget cut) | navmap (footprint) go: success / agree | navmap (rehearsal) go: success / agree (≤ best any map) |\n",
         "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for row in &r.rows {
@@ -787,8 +801,8 @@ pub fn table_markdown(r: &SuiteReport) -> String {
             } else {
                 "–".into()
             },
-            go_cell(Some(&row.navmap)),
-            go_cell(row.rehearsal.as_ref()),
+            go_cell(Some(&row.navmap), None),
+            go_cell(row.rehearsal.as_ref(), row.rehearsal_agreement_ceiling),
         );
     }
     s
