@@ -6,6 +6,7 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
+use ground_sim::evaluation::navmap::NavmapScore;
 use serde_json::Value;
 
 /// Arguments of `ground-sim results`.
@@ -250,14 +251,11 @@ fn suite_section(
     let mut misses = 0;
     for (sd, rep) in [(&seed, &report), (&seed2, &report2)] {
         for r in rep["rows"].as_array().into_iter().flatten() {
-            let m = &r["rehearsal"];
-            let g = |k: &str| m[k].as_u64().unwrap_or(0);
-            let n = g("go_frames") + g("nogo_frames");
-            if m.is_null() || n == 0 {
+            let Ok(m) = serde_json::from_value::<NavmapScore>(r["rehearsal"].clone()) else {
                 continue;
-            }
-            let agree = (g("go_success") + g("nogo_frames") - g("nogo_success")) as f64 / n as f64;
-            if agree >= 0.9 {
+            };
+            let agree = m.agreement();
+            if m.go_frames + m.nogo_frames == 0 || agree >= 0.9 {
                 continue;
             }
             misses += 1;
@@ -267,16 +265,12 @@ fn suite_section(
                 r["scene"].as_str().unwrap_or("?"),
                 r["kind"].as_str().unwrap_or("?"),
                 match &r["summary"]["prior"] {
-                    serde_json::Value::Null => "none".to_string(),
+                    Value::Null => "none".to_string(),
                     pr => format!("{} m, {}°", pr["sigma_m"], pr["heading_sigma_deg"]),
                 },
                 100.0 * r["summary"]["success_rate"].as_f64().unwrap_or(f64::NAN),
-                if g("go_frames") > 0 {
-                    format!(
-                        "{:.1} % of {}",
-                        100.0 * g("go_success") as f64 / g("go_frames") as f64,
-                        g("go_frames")
-                    )
+                if m.go_frames > 0 {
+                    format!("{:.1} % of {}", 100.0 * m.go_success_rate(), m.go_frames)
                 } else {
                     "none".into()
                 },

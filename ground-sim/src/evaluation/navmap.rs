@@ -13,7 +13,7 @@
 use nav_core::Tile;
 use nav_core::frame::slope_to_deg;
 use rayon::prelude::*;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// When a cell is predicted "go".
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
@@ -276,7 +276,7 @@ pub fn agreement_ceiling(chances: &[f64], min_go_success: f64) -> f64 {
 
 /// How the prediction fared on a campaign: each frame's prediction at its true centre against
 /// its outcome (a correct fix or not).
-#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 pub struct NavmapScore {
     /// Frames predicted "go".
     pub go_frames: usize,
